@@ -1,0 +1,39 @@
+"""Structure descriptions, YAML model files, exact symbolic derivation and compiled numeric models."""
+
+from cappe.model.loader import FORMAT, load_model, structure_from_mapping
+from cappe.model.numeric import NumericModel, compile_model
+from cappe.model.structure import (
+    GROUND,
+    Axis,
+    Body,
+    Input,
+    Output,
+    Parameter,
+    Sensor,
+    Spin,
+    StiffnessDampingElement,
+    Structure,
+    StructureBuilder,
+)
+from cappe.model.symbolic import SymbolicModel, derive
+
+__all__ = [
+    "FORMAT",
+    "GROUND",
+    "Axis",
+    "Body",
+    "Input",
+    "NumericModel",
+    "Output",
+    "Parameter",
+    "Sensor",
+    "Spin",
+    "StiffnessDampingElement",
+    "Structure",
+    "StructureBuilder",
+    "SymbolicModel",
+    "compile_model",
+    "derive",
+    "load_model",
+    "structure_from_mapping",
+]

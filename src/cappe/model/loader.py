@@ -1,0 +1,136 @@
+"""Reading model files (YAML, ``format: cappe.model/1``) and built-in models into a Structure."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from cappe.exceptions import ModelError
+from cappe.model.structure import Structure, StructureBuilder
+
+__all__ = ["FORMAT", "load_model", "structure_from_mapping"]
+
+FORMAT = "cappe.model/1"
+BUILTIN_PREFIX = "builtin:"
+
+_TOP = {"format", "name", "description", "source", "parameters", "axes", "bodies", "elements", "inputs",
+        "outputs", "sensors"}
+_KEYS = {
+    "parameters": ({"name", "value"}, {"unit", "kind", "bounds", "unknown", "disturbable", "description"}),
+    "axes": ({"name"}, {"positions", "unit", "description"}),
+    "bodies": ({"name", "mass"}, {"inertia", "position", "com", "dofs", "spin", "description"}),
+    "elements": ({"name", "bodies"}, {"points", "at", "axes", "stiffness", "damping", "loss", "description"}),
+    "inputs": ({"name", "body"}, {"point", "direction", "kind"}),
+    "outputs": ({"name"}, {"quantity", "body", "point", "direction", "rotation", "sensor", "element"}),
+    "sensors": ({"name", "body"}, {"point"}),
+}
+# sensors are declared before outputs so that outputs can refer to them
+_ORDER = ("parameters", "axes", "bodies", "elements", "sensors", "inputs", "outputs")
+
+
+def load_model(source: str | Path) -> Structure:
+    """Load a model from a YAML file path or a built-in name ``builtin:NAME``.
+
+    Raises
+    ------
+    ModelError
+        If the file cannot be read or parsed, or breaks a rule; the message names the file, the entry
+        and the rule.
+
+    Examples
+    --------
+    >>> load_model("builtin:two-mass-rig").n_dof
+    2
+    """
+    text_source = str(source)
+    if text_source.startswith(BUILTIN_PREFIX):
+        from cappe.library import builtin_path
+
+        path = builtin_path(text_source[len(BUILTIN_PREFIX):])
+        label = text_source
+    else:
+        path = Path(source)
+        label = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as exc:
+        msg = f"cannot read model file {label}: {exc.strerror or exc}"
+        raise ModelError(msg) from exc
+    return structure_from_yaml(text, label)
+
+
+def structure_from_yaml(text: str, label: str = "<string>") -> Structure:
+    """Parse YAML model text; ``label`` names the file in error messages."""
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as exc:
+        mark = getattr(exc, "problem_mark", None)
+        line = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "unknown line"
+        problem = getattr(exc, "problem", None) or str(exc)
+        msg = f"malformed YAML in {label} at {line}: {problem}"
+        raise ModelError(msg) from exc
+    if not isinstance(data, Mapping):
+        msg = f"model file {label} must contain a mapping at the top level; got {type(data).__name__}"
+        raise ModelError(msg)
+    return structure_from_mapping(data, label)
+
+
+def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") -> Structure:
+    """Build a Structure from the parsed content of a model file."""
+    fmt = data.get("format", FORMAT)
+    if fmt != FORMAT:
+        msg = f"{label}: unsupported model format {fmt!r}; expected {FORMAT!r}"
+        raise ModelError(msg)
+    unknown = sorted(set(data) - _TOP)
+    if unknown:
+        msg = f"{label}: unknown top-level key(s) {', '.join(map(str, unknown))}; allowed: {', '.join(sorted(_TOP))}"
+        raise ModelError(msg)
+    name = data.get("name")
+    if not isinstance(name, str) or not name:
+        msg = f"{label}: 'name' must be a non-empty string; got {name!r}"
+        raise ModelError(msg)
+    builder = StructureBuilder(name, description=str(data.get("description", "") or ""), source=label)
+    for group in _ORDER:
+        entries = data.get(group, []) or []
+        if not isinstance(entries, list):
+            msg = f"{label}: '{group}' must be a list; got {type(entries).__name__}"
+            raise ModelError(msg)
+        required, optional = _KEYS[group]
+        for i, entry in enumerate(entries):
+            where = f"{label}, {group}[{i}]"
+            if not isinstance(entry, Mapping):
+                msg = f"{where}: entry must be a mapping; got {entry!r}"
+                raise ModelError(msg)
+            missing = sorted(required - set(entry))
+            if missing:
+                msg = f"{where}: missing required key(s) {', '.join(missing)}"
+                raise ModelError(msg)
+            extra = sorted(set(entry) - required - optional)
+            if extra:
+                msg = (
+                    f"{where}: unknown key(s) {', '.join(map(str, extra))}; "
+                    f"allowed: {', '.join(sorted(required | optional))}"
+                )
+                raise ModelError(msg)
+            fields = dict(entry)
+            item_name = fields.pop("name")
+            method = getattr(builder, _METHOD[group])
+            if group == "parameters":
+                method(item_name, fields.pop("value"), where=where, **fields)
+            else:
+                method(item_name, where=where, **fields)
+    return builder.build()
+
+
+_METHOD = {
+    "parameters": "parameter",
+    "axes": "axis",
+    "bodies": "body",
+    "elements": "element",
+    "inputs": "input",
+    "outputs": "output",
+    "sensors": "sensor",
+}

@@ -1,0 +1,789 @@
+"""Structure descriptions: parameters, axes, rigid bodies, stiffness-damping elements, inputs, outputs, sensors.
+
+Every description is a frozen dataclass holding sympy expressions in the model's parameter and axis names.
+A :class:`Structure` is immutable; it is built and validated by :class:`StructureBuilder` (which the YAML
+loader also uses, so a file and a Python script that say the same thing give the same Structure).
+
+Conventions (SI units throughout)
+---------------------------------
+* Every body has a reference point (its *origin*) whose nominal position in the global frame is
+  ``position``; the body frame is parallel to the global frame in the nominal configuration. Attachment
+  points, sensor points and the centre of mass are given in the body frame, relative to the origin.
+  Points on ``ground`` are global coordinates. Positions and points may depend on axis coordinates
+  (thesis CASE 3: the nominal configuration moves with the axes; small vibrations are superimposed).
+* Generalized coordinates per body: translations ``x y z`` of the origin and small rotations
+  ``rx ry rz`` about the global axes; a body uses 1-6 of them (``dofs``). Inactive DOFs are held at zero.
+* An element joins body ``a`` to body ``b``. Its local axes are the columns of ``axes`` (global frame).
+  The elongation in local direction ``x`` is the displacement of b's point minus a's point along the
+  local x axis; ``rx`` is the relative rotation about that axis. Each direction may carry a stiffness
+  ``k`` (N/m or N m/rad), a viscous damping ``c`` (N s/m or N m s/rad) and a loss factor ``eta``
+  (dimensionless): the hysteretic (structural) damping force is ``1j * eta * k * elongation``, so the
+  hysteretic matrix is ``H = sum(eta k h^T h)`` and an isolated element has damping ratio ``eta / 2``.
+* A spinning body (``spin``) adds the gyroscopic matrix ``G = -Ip * Omega * [n]x`` on its rotational DOFs,
+  with ``n`` the unit spin axis, ``Ip`` the polar moment of inertia and ``Omega`` the spin speed (rad/s).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from types import MappingProxyType
+from typing import Any
+
+import sympy as sp
+
+from cappe.exceptions import ModelError
+from cappe.model._expressions import NAME_PATTERN, as_expression, symbol
+
+__all__ = [
+    "DIRECTIONS",
+    "GROUND",
+    "PARAMETER_KINDS",
+    "QUANTITIES",
+    "Axis",
+    "Body",
+    "Input",
+    "Output",
+    "Parameter",
+    "Sensor",
+    "Spin",
+    "StiffnessDampingElement",
+    "Structure",
+    "StructureBuilder",
+]
+
+GROUND = "ground"
+DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
+PARAMETER_KINDS = ("mass", "inertia", "stiffness", "damping", "loss", "length", "other")
+QUANTITIES = ("displacement", "velocity", "acceleration", "elongation")
+_UNIT_AXES = {"x": (1, 0, 0), "y": (0, 1, 0), "z": (0, 0, 1)}
+
+Vector3 = tuple[sp.Expr, sp.Expr, sp.Expr]
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A named model parameter (SI value).
+
+    ``unknown`` marks the parameters an identification should estimate; ``disturbable`` marks known
+    parameters whose values are uncertain enough to perturb in robustness studies.
+    """
+
+    name: str
+    value: float
+    unit: str = ""
+    kind: str = "other"
+    bounds: tuple[float, float] | None = None
+    unknown: bool = False
+    disturbable: bool = False
+    description: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "name": self.name,
+            "value": self.value,
+            "unit": self.unit,
+            "kind": self.kind,
+            "bounds": list(self.bounds) if self.bounds is not None else None,
+            "unknown": self.unknown,
+            "disturbable": self.disturbable,
+        }
+
+
+@dataclass(frozen=True)
+class Axis:
+    """A machine axis whose coordinate (m or rad) reconfigures the structure."""
+
+    name: str
+    positions: tuple[float, ...]
+    unit: str = "m"
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class Spin:
+    """Steady spin of a body: unit axis ``axis`` (global), speed ``speed`` (rad/s), polar inertia (kg m^2)."""
+
+    axis: Vector3
+    speed: sp.Expr
+    polar_inertia: sp.Expr
+
+
+@dataclass(frozen=True)
+class Body:
+    """A rigid body: mass (kg), inertia tensor about its centre of mass (kg m^2), nominal origin, DOFs."""
+
+    name: str
+    mass: sp.Expr
+    inertia: sp.ImmutableMatrix
+    position: Vector3
+    com: Vector3
+    dofs: tuple[str, ...]
+    spin: Spin | None = None
+    description: str = ""
+
+
+@dataclass(frozen=True)
+class StiffnessDampingElement:
+    """A stiffness-damping element (SDE) joining body ``body_a`` to ``body_b`` (either may be ground)."""
+
+    name: str
+    body_a: str
+    body_b: str
+    point_a: Vector3
+    point_b: Vector3
+    axes: sp.ImmutableMatrix
+    stiffness: Mapping[str, sp.Expr]
+    damping: Mapping[str, sp.Expr]
+    loss: Mapping[str, sp.Expr]
+    description: str = ""
+
+    @property
+    def directions(self) -> tuple[str, ...]:
+        """Directions that carry stiffness, damping or loss, in DIRECTIONS order."""
+        used = set(self.stiffness) | set(self.damping) | set(self.loss)
+        return tuple(d for d in DIRECTIONS if d in used)
+
+
+@dataclass(frozen=True)
+class Input:
+    """A force (N) or moment (N m) acting on ``body`` at ``point`` along unit ``direction`` (global)."""
+
+    name: str
+    kind: str
+    body: str
+    point: Vector3
+    direction: Vector3
+
+
+@dataclass(frozen=True)
+class Output:
+    """A measured quantity: motion of a body point along a direction, or an element elongation.
+
+    For ``quantity == "elongation"``, ``element`` and ``element_direction`` name the element and its
+    local direction; otherwise ``body``, ``point`` and ``direction`` (unit, global) are used. A rotational
+    motion output is given with ``rotation=True`` (rad, rad/s, rad/s^2).
+    """
+
+    name: str
+    quantity: str
+    body: str = ""
+    point: Vector3 = (sp.Integer(0), sp.Integer(0), sp.Integer(0))
+    direction: Vector3 = (sp.Integer(1), sp.Integer(0), sp.Integer(0))
+    rotation: bool = False
+    element: str = ""
+    element_direction: str = ""
+
+
+@dataclass(frozen=True)
+class Sensor:
+    """A named sensor node: a point on a body (body frame)."""
+
+    name: str
+    body: str
+    point: Vector3
+
+
+@dataclass(frozen=True)
+class Structure:
+    """A validated, immutable description of a lumped-parameter machine structure."""
+
+    name: str
+    parameters: tuple[Parameter, ...]
+    axes: tuple[Axis, ...]
+    bodies: tuple[Body, ...]
+    elements: tuple[StiffnessDampingElement, ...]
+    inputs: tuple[Input, ...]
+    outputs: tuple[Output, ...]
+    sensors: tuple[Sensor, ...] = ()
+    description: str = ""
+    source: str = ""
+    _index: Mapping[str, Mapping[str, int]] = field(default_factory=dict, repr=False, compare=False)
+
+    # -- look-ups ---------------------------------------------------------------------------------
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    @property
+    def axis_names(self) -> tuple[str, ...]:
+        return tuple(a.name for a in self.axes)
+
+    @property
+    def dofs(self) -> tuple[str, ...]:
+        """Generalized coordinates as ``body.dof`` labels, bodies in order, then x y z rx ry rz."""
+        return tuple(f"{b.name}.{d}" for b in self.bodies for d in b.dofs)
+
+    @property
+    def n_dof(self) -> int:
+        return sum(len(b.dofs) for b in self.bodies)
+
+    def parameter(self, name: str) -> Parameter:
+        return self.parameters[self._lookup("parameters", name)]
+
+    def body(self, name: str) -> Body:
+        return self.bodies[self._lookup("bodies", name)]
+
+    def element(self, name: str) -> StiffnessDampingElement:
+        return self.elements[self._lookup("elements", name)]
+
+    def input(self, name: str) -> Input:
+        return self.inputs[self._lookup("inputs", name)]
+
+    def output(self, name: str) -> Output:
+        return self.outputs[self._lookup("outputs", name)]
+
+    def sensor(self, name: str) -> Sensor:
+        return self.sensors[self._lookup("sensors", name)]
+
+    def _lookup(self, group: str, name: str) -> int:
+        index = self._index.get(group)
+        if index is None:
+            index = {item.name: i for i, item in enumerate(getattr(self, group))}
+        if name not in index:
+            known = ", ".join(index) or "none"
+            msg = f"model '{self.name}' has no {group[:-1]} named {name!r}; known: {known}"
+            raise ModelError(msg)
+        return index[name]
+
+    @property
+    def nominal(self) -> dict[str, float]:
+        """Nominal parameter values by name."""
+        return {p.name: p.value for p in self.parameters}
+
+    def default_position(self) -> dict[str, float]:
+        """The first listed position of every axis (0 when an axis lists none)."""
+        return {a.name: (a.positions[0] if a.positions else 0.0) for a in self.axes}
+
+    def resolve_parameters(self, values: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Nominal values overridden by ``values``; unknown names and non-finite values are errors."""
+        out = self.nominal
+        for name, value in (values or {}).items():
+            if name not in out:
+                msg = f"unknown parameter {name!r} for model '{self.name}'; known: {', '.join(out)}"
+                raise ModelError(msg)
+            try:
+                number = float(value)
+            except (TypeError, ValueError) as exc:
+                msg = f"parameter {name!r} must be a number; got {value!r}"
+                raise ModelError(msg) from exc
+            if not math.isfinite(number):
+                msg = f"parameter {name!r} must be finite; got {value!r}"
+                raise ModelError(msg)
+            out[name] = number
+        return out
+
+    def resolve_position(self, position: Mapping[str, float] | None = None) -> dict[str, float]:
+        """Default axis position overridden by ``position``; unknown axes are errors."""
+        out = self.default_position()
+        for name, value in (position or {}).items():
+            if name not in out:
+                known = ", ".join(out) or "none (this model has no axes)"
+                msg = f"unknown axis {name!r} for model '{self.name}'; known axes: {known}"
+                raise ModelError(msg)
+            out[name] = float(value)
+        return out
+
+
+# ---------------------------------------------------------------------------------------------------
+class StructureBuilder:
+    """Builds a validated :class:`Structure` step by step.
+
+    Parameters and axes must be declared before the expressions that use them. ``where`` arguments are
+    locations for error messages (the YAML loader passes ``"file.yaml, bodies[2]"``).
+
+    Examples
+    --------
+    >>> b = StructureBuilder("spring-mass")
+    >>> b.parameter("m", 2.0, unit="kg", kind="mass")
+    >>> b.parameter("k", 8.0e3, unit="N/m", kind="stiffness")
+    >>> b.body("mass", mass="m", dofs=["x"])
+    >>> b.element("spring", bodies=("mass", "ground"), stiffness={"x": "k"})
+    >>> b.input("F", body="mass", direction=[1, 0, 0])
+    >>> b.output("d", quantity="displacement", body="mass", direction=[1, 0, 0])
+    >>> b.build().n_dof
+    1
+    """
+
+    def __init__(self, name: str, *, description: str = "", source: str = "") -> None:
+        self.name = name
+        self.description = description
+        self.source = source
+        self._parameters: list[Parameter] = []
+        self._axes: list[Axis] = []
+        self._bodies: list[Body] = []
+        self._elements: list[StiffnessDampingElement] = []
+        self._inputs: list[Input] = []
+        self._outputs: list[Output] = []
+        self._sensors: list[Sensor] = []
+        self._names: dict[str, dict[str, str]] = {}
+        self._where_of: dict[tuple[str, str], str] = {}
+
+    # -- helpers ----------------------------------------------------------------------------------
+    def _here(self, where: str | None, group: str, index: int) -> str:
+        if where:
+            return where
+        return f"{self.source + ', ' if self.source else ''}{group}[{index}]"
+
+    def _claim(self, group: str, name: object, where: str) -> str:
+        if not isinstance(name, str) or not NAME_PATTERN.match(name):
+            msg = f"{group[:-1]} name must be an identifier (letters, digits, _); got {name!r} ({where})"
+            raise ModelError(msg)
+        taken = self._names.setdefault(group, {})
+        if name in taken:
+            msg = f"duplicate {group[:-1]} name {name!r} ({where}); first defined at {taken[name]}"
+            raise ModelError(msg)
+        taken[name] = where
+        return name
+
+    @property
+    def _symbols(self) -> list[str]:
+        return [p.name for p in self._parameters] + [a.name for a in self._axes]
+
+    def _expr(self, value: object, where: str) -> sp.Expr:
+        return as_expression(value, self._symbols, where)
+
+    def _vector(self, value: object, where: str, *, unit: bool = False) -> Vector3:
+        if isinstance(value, str) and value.lstrip("+-") in _UNIT_AXES:
+            sign = -1 if value.startswith("-") else 1
+            return tuple(sp.Integer(sign * c) for c in _UNIT_AXES[value.lstrip("+-")])  # type: ignore[return-value]
+        if not isinstance(value, (list, tuple)) or len(value) != 3:
+            msg = f"expected a 3-vector [x, y, z]; got {value!r} ({where})"
+            raise ModelError(msg)
+        vec = tuple(self._expr(v, f"{where}[{i}]") for i, v in enumerate(value))
+        if unit:
+            norm2 = sum(v**2 for v in vec)
+            nominal = self._nominal_value(norm2)
+            if nominal is not None and nominal <= 1e-24:
+                msg = f"direction must have non-zero length; got {list(value)!r} ({where})"
+                raise ModelError(msg)
+            norm = sp.sqrt(norm2)
+            vec = tuple(sp.simplify(v / norm) for v in vec)
+        return vec  # type: ignore[return-value]
+
+    def _nominal_value(self, expr: sp.Expr) -> float | None:
+        """Value of ``expr`` at nominal parameters, at every listed axis position; worst case returned.
+
+        Returns None if the expression cannot be evaluated to a real number.
+        """
+        subs = {symbol(p.name): sp.Float(p.value) for p in self._parameters}
+        positions = [{}] if not self._axes else [
+            {symbol(a.name): sp.Float(v)} for a in self._axes for v in (a.positions or (0.0,))
+        ]
+        values = []
+        for pos in positions:
+            try:
+                values.append(float(sp.sympify(expr).xreplace({**subs, **pos}).evalf()))
+            except (TypeError, ValueError):
+                return None
+        return min(values) if values else None
+
+    def _relative(self, body: str, location: Vector3) -> Vector3:
+        """A global location expressed in ``body``'s frame (ground: unchanged)."""
+        if body == GROUND:
+            return location
+        origin = next(b.position for b in self._bodies if b.name == body)
+        return tuple(sp.expand(location[i] - origin[i]) for i in range(3))  # type: ignore[return-value]
+
+    def _require_body(self, name: object, where: str, *, allow_ground: bool) -> str:
+        known = [b.name for b in self._bodies]
+        if allow_ground and name == GROUND:
+            return GROUND
+        if name not in known:
+            extra = " or 'ground'" if allow_ground else ""
+            msg = (
+                f"unknown body {name!r} ({where}); known bodies: {', '.join(known) or 'none'}{extra}"
+            )
+            raise ModelError(msg)
+        return str(name)
+
+    # -- declarations -----------------------------------------------------------------------------
+    def parameter(
+        self,
+        name: str,
+        value: float,
+        *,
+        unit: str = "",
+        kind: str = "other",
+        bounds: Sequence[float] | None = None,
+        unknown: bool = False,
+        disturbable: bool = False,
+        description: str = "",
+        where: str | None = None,
+    ) -> None:
+        """Declare a parameter with its nominal SI value."""
+        where = self._here(where, "parameters", len(self._parameters))
+        self._claim("parameters", name, where)
+        if name in {a.name for a in self._axes}:
+            msg = f"parameter name {name!r} is already an axis name ({where})"
+            raise ModelError(msg)
+        if kind not in PARAMETER_KINDS:
+            msg = f"parameter {name!r} kind must be one of {', '.join(PARAMETER_KINDS)}; got {kind!r} ({where})"
+            raise ModelError(msg)
+        number = _finite(value, f"parameter {name!r} value", where)
+        if kind in ("mass", "inertia", "stiffness") and number <= 0:
+            msg = f"parameter {name!r} ({kind}) must be > 0; got {number!r} ({where})"
+            raise ModelError(msg)
+        if kind in ("damping", "loss") and number < 0:
+            msg = f"parameter {name!r} ({kind}) must be >= 0; got {number!r} ({where})"
+            raise ModelError(msg)
+        lohi: tuple[float, float] | None = None
+        if bounds is not None:
+            if not isinstance(bounds, (list, tuple)) or len(bounds) != 2:
+                msg = f"parameter {name!r} bounds must be [lo, hi]; got {bounds!r} ({where})"
+                raise ModelError(msg)
+            lo = _finite(bounds[0], f"parameter {name!r} lower bound", where)
+            hi = _finite(bounds[1], f"parameter {name!r} upper bound", where)
+            if not lo < hi:
+                msg = f"parameter {name!r} bounds must satisfy lo < hi; got [{lo!r}, {hi!r}] ({where})"
+                raise ModelError(msg)
+            if not lo <= number <= hi:
+                msg = (
+                    f"parameter {name!r} value {number!r} lies outside its bounds [{lo!r}, {hi!r}] ({where})"
+                )
+                raise ModelError(msg)
+            lohi = (lo, hi)
+        if unknown and lohi is None:
+            msg = f"unknown parameter {name!r} needs bounds [lo, hi] ({where})"
+            raise ModelError(msg)
+        self._parameters.append(
+            Parameter(name, number, str(unit), kind, lohi, bool(unknown), bool(disturbable), str(description))
+        )
+
+    def axis(self, name: str, positions: Sequence[float] = (), *, unit: str = "m", description: str = "",
+             where: str | None = None) -> None:
+        """Declare a machine axis and the positions at which the model is studied."""
+        where = self._here(where, "axes", len(self._axes))
+        self._claim("axes", name, where)
+        if name in {p.name for p in self._parameters}:
+            msg = f"axis name {name!r} is already a parameter name ({where})"
+            raise ModelError(msg)
+        if not isinstance(positions, (list, tuple)):
+            msg = f"axis {name!r} positions must be a list of numbers; got {positions!r} ({where})"
+            raise ModelError(msg)
+        values = tuple(_finite(v, f"axis {name!r} position", where) for v in positions)
+        self._axes.append(Axis(name, values, str(unit), str(description)))
+
+    def body(
+        self,
+        name: str,
+        *,
+        mass: object,
+        inertia: object = None,
+        position: object = (0, 0, 0),
+        com: object = (0, 0, 0),
+        dofs: Sequence[str] = DIRECTIONS,
+        spin: Mapping[str, object] | None = None,
+        description: str = "",
+        where: str | None = None,
+    ) -> None:
+        """Declare a rigid body.
+
+        ``inertia`` is the tensor about the centre of mass in the body frame: a 3x3 list, a mapping with
+        keys ``xx yy zz xy xz yz`` (missing products are 0), or None for a point mass (only allowed when
+        no rotational DOF is active).
+        """
+        where = self._here(where, "bodies", len(self._bodies))
+        if name == GROUND:
+            msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
+            raise ModelError(msg)
+        self._claim("bodies", name, where)
+        dof_list = list(dofs) if isinstance(dofs, (list, tuple)) else [dofs]
+        bad = [d for d in dof_list if d not in DIRECTIONS]
+        if bad or not dof_list or len(set(dof_list)) != len(dof_list):
+            msg = (
+                f"body {name!r} dofs must be 1-6 distinct names from {', '.join(DIRECTIONS)}; "
+                f"got {dofs!r} ({where}.dofs)"
+            )
+            raise ModelError(msg)
+        ordered = tuple(d for d in DIRECTIONS if d in dof_list)
+        mass_expr = self._expr(mass, f"{where}.mass")
+        mass_value = self._nominal_value(mass_expr)
+        if mass_value is not None and mass_value <= 0:
+            msg = f"body {name!r} mass must be > 0; got {mass_value:.6g} ({where}.mass)"
+            raise ModelError(msg)
+        rotational = any(d.startswith("r") for d in ordered)
+        tensor = self._inertia(name, inertia, where, required=rotational)
+        spin_obj = None
+        if spin is not None:
+            spin_obj = self._spin(name, spin, tensor, f"{where}.spin")
+        self._bodies.append(
+            Body(
+                name=name,
+                mass=mass_expr,
+                inertia=tensor,
+                position=self._vector(position, f"{where}.position"),
+                com=self._vector(com, f"{where}.com"),
+                dofs=ordered,
+                spin=spin_obj,
+                description=str(description),
+            )
+        )
+
+    def _inertia(self, name: str, inertia: object, where: str, *, required: bool) -> sp.ImmutableMatrix:
+        if inertia is None:
+            if required:
+                msg = f"body {name!r} has rotational DOFs and needs an inertia tensor ({where}.inertia)"
+                raise ModelError(msg)
+            return sp.ImmutableMatrix(sp.zeros(3, 3))
+        here = f"{where}.inertia"
+        if isinstance(inertia, Mapping):
+            unknown = set(inertia) - {"xx", "yy", "zz", "xy", "xz", "yz"}
+            if unknown:
+                msg = f"inertia keys must be xx yy zz xy xz yz; got {sorted(unknown)} ({here})"
+                raise ModelError(msg)
+            get = {k: self._expr(inertia.get(k, 0), f"{here}.{k}") for k in ("xx", "yy", "zz", "xy", "xz", "yz")}
+            rows = [
+                [get["xx"], get["xy"], get["xz"]],
+                [get["xy"], get["yy"], get["yz"]],
+                [get["xz"], get["yz"], get["zz"]],
+            ]
+        elif isinstance(inertia, (list, tuple)) and len(inertia) == 3 and all(
+            isinstance(r, (list, tuple)) and len(r) == 3 for r in inertia
+        ):
+            rows = [[self._expr(v, f"{here}[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(inertia)]
+        else:
+            msg = f"inertia must be a 3x3 list or a mapping of xx yy zz xy xz yz; got {inertia!r} ({here})"
+            raise ModelError(msg)
+        tensor = sp.ImmutableMatrix(rows)
+        if tensor != tensor.T:
+            msg = f"body {name!r} inertia tensor must be symmetric ({here})"
+            raise ModelError(msg)
+        if required:
+            self._check_positive_definite(name, tensor, here)
+        return tensor
+
+    def _check_positive_definite(self, name: str, tensor: sp.ImmutableMatrix, where: str) -> None:
+        import numpy as np
+
+        subs = {symbol(p.name): p.value for p in self._parameters}
+        positions = [{}] if not self._axes else [
+            {symbol(a.name): v} for a in self._axes for v in (a.positions or (0.0,))
+        ]
+        for pos in positions:
+            try:
+                values = np.array(tensor.xreplace({**subs, **pos}).evalf(), dtype=float)
+            except (TypeError, ValueError):
+                return
+            eig = np.linalg.eigvalsh(values)
+            if eig.min() <= 1e-12 * max(1.0, abs(eig).max()):
+                msg = (
+                    f"body {name!r} inertia tensor must be positive definite; eigenvalues "
+                    f"{', '.join(f'{e:.4g}' for e in eig)} kg m^2 ({where})"
+                )
+                raise ModelError(msg)
+
+    def _spin(self, name: str, spin: Mapping[str, object], tensor: sp.ImmutableMatrix, where: str) -> Spin:
+        if not isinstance(spin, Mapping) or "speed" not in spin:
+            msg = f"body {name!r} spin needs 'speed' (rad/s) and 'axis'; got {spin!r} ({where})"
+            raise ModelError(msg)
+        axis = self._vector(spin.get("axis", "z"), f"{where}.axis", unit=True)
+        speed = self._expr(spin["speed"], f"{where}.speed")
+        if "polar_inertia" in spin:
+            polar = self._expr(spin["polar_inertia"], f"{where}.polar_inertia")
+        else:
+            n = sp.Matrix(axis)
+            polar = sp.simplify((n.T * tensor * n)[0, 0])
+        return Spin(axis=axis, speed=speed, polar_inertia=polar)
+
+    def element(
+        self,
+        name: str,
+        *,
+        bodies: Sequence[str],
+        points: Sequence[object] | None = None,
+        at: object = None,
+        axes: Mapping[str, object] | None = None,
+        stiffness: Mapping[str, object] | None = None,
+        damping: Mapping[str, object] | None = None,
+        loss: Mapping[str, object] | None = None,
+        description: str = "",
+        where: str | None = None,
+    ) -> None:
+        """Declare a stiffness-damping element between two bodies (or a body and ground).
+
+        ``points`` gives the attachment point in each body's frame (default: both origins); alternatively
+        ``at`` gives one global location (expressions may use axis coordinates) where the element attaches
+        to both bodies, converted to body frames with the bodies' nominal positions.
+        ``axes`` optionally gives the local ``x`` and ``y`` axes (global frame); ``z = x × y``.
+        ``stiffness``, ``damping`` and ``loss`` map directions (x y z rx ry rz) to expressions.
+        """
+        where = self._here(where, "elements", len(self._elements))
+        self._claim("elements", name, where)
+        if not isinstance(bodies, (list, tuple)) or len(bodies) != 2:
+            msg = f"element {name!r} bodies must be a pair [a, b]; got {bodies!r} ({where}.bodies)"
+            raise ModelError(msg)
+        a = self._require_body(bodies[0], f"{where}.bodies[0]", allow_ground=True)
+        b = self._require_body(bodies[1], f"{where}.bodies[1]", allow_ground=True)
+        if a == b:
+            msg = f"element {name!r} must join two different bodies; got {a!r} twice ({where}.bodies)"
+            raise ModelError(msg)
+        if at is not None:
+            if points is not None:
+                msg = f"element {name!r} takes either 'points' or 'at', not both ({where})"
+                raise ModelError(msg)
+            location = self._vector(at, f"{where}.at")
+            point_a = self._relative(a, location)
+            point_b = self._relative(b, location)
+        else:
+            pts = points if points is not None else ((0, 0, 0), (0, 0, 0))
+            if not isinstance(pts, (list, tuple)) or len(pts) != 2:
+                msg = f"element {name!r} points must be a pair of 3-vectors; got {points!r} ({where}.points)"
+                raise ModelError(msg)
+            point_a = self._vector(pts[0], f"{where}.points[0]")
+            point_b = self._vector(pts[1], f"{where}.points[1]")
+        frame = self._frame(name, axes, f"{where}.axes")
+        groups = {}
+        for label, table, kind in (("stiffness", stiffness, "stiffness"), ("damping", damping, "damping"),
+                                   ("loss", loss, "loss")):
+            groups[label] = self._directional(name, label, table or {}, f"{where}.{label}", kind)
+        if not any(groups.values()):
+            msg = f"element {name!r} has no stiffness, damping or loss in any direction ({where})"
+            raise ModelError(msg)
+        self._elements.append(
+            StiffnessDampingElement(
+                name=name, body_a=a, body_b=b, point_a=point_a, point_b=point_b, axes=frame,
+                stiffness=groups["stiffness"], damping=groups["damping"], loss=groups["loss"],
+                description=str(description),
+            )
+        )
+
+    def _frame(self, name: str, axes: Mapping[str, object] | None, where: str) -> sp.ImmutableMatrix:
+        if axes is None:
+            return sp.ImmutableMatrix(sp.eye(3))
+        if not isinstance(axes, Mapping) or set(axes) - {"x", "y"} or "x" not in axes:
+            msg = f"element {name!r} axes must give 'x' and optionally 'y' as 3-vectors; got {axes!r} ({where})"
+            raise ModelError(msg)
+        ex = sp.Matrix(self._vector(axes["x"], f"{where}.x", unit=True))
+        if "y" in axes:
+            ey_raw = sp.Matrix(self._vector(axes["y"], f"{where}.y", unit=True))
+        else:
+            # any vector not parallel to x completes the frame
+            trial = sp.Matrix([0, 0, 1]) if abs(self._nominal_value(ex[2]) or 0.0) < 0.9 else sp.Matrix([1, 0, 0])
+            ey_raw = trial
+        ey = ey_raw - (ex.T * ey_raw)[0, 0] * ex
+        norm = self._nominal_value(sp.sqrt((ey.T * ey)[0, 0]))
+        if norm is not None and norm < 1e-9:
+            msg = f"element {name!r} axes x and y must not be parallel ({where})"
+            raise ModelError(msg)
+        ey = sp.simplify(ey / sp.sqrt((ey.T * ey)[0, 0]))
+        ez = ex.cross(ey)
+        return sp.ImmutableMatrix(sp.Matrix.hstack(ex, ey, sp.simplify(ez)))
+
+    def _directional(self, name: str, label: str, table: Mapping[str, object], where: str,
+                     kind: str) -> Mapping[str, sp.Expr]:
+        if not isinstance(table, Mapping):
+            msg = f"element {name!r} {label} must map directions to values; got {table!r} ({where})"
+            raise ModelError(msg)
+        out: dict[str, sp.Expr] = {}
+        for direction, value in table.items():
+            if direction not in DIRECTIONS:
+                msg = (
+                    f"element {name!r} {label} direction must be one of {', '.join(DIRECTIONS)}; "
+                    f"got {direction!r} ({where})"
+                )
+                raise ModelError(msg)
+            expr = self._expr(value, f"{where}.{direction}")
+            nominal = self._nominal_value(expr)
+            if nominal is not None:
+                if kind == "stiffness" and nominal < 0:
+                    msg = f"element {name!r} stiffness {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                    raise ModelError(msg)
+                if kind != "stiffness" and nominal < 0:
+                    msg = f"element {name!r} {label} {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                    raise ModelError(msg)
+            out[direction] = expr
+        return MappingProxyType({d: out[d] for d in DIRECTIONS if d in out})
+
+    def input(self, name: str, *, body: str, point: object = (0, 0, 0), direction: object = "x",
+              kind: str = "force", where: str | None = None) -> None:
+        """Declare an input: a force (N) or moment (N m) on a body."""
+        where = self._here(where, "inputs", len(self._inputs))
+        self._claim("signals", name, where)
+        if kind not in ("force", "moment"):
+            msg = f"input {name!r} kind must be 'force' or 'moment'; got {kind!r} ({where}.kind)"
+            raise ModelError(msg)
+        body_name = self._require_body(body, f"{where}.body", allow_ground=False)
+        self._inputs.append(
+            Input(name=name, kind=kind, body=body_name, point=self._vector(point, f"{where}.point"),
+                  direction=self._vector(direction, f"{where}.direction", unit=True))
+        )
+
+    def output(self, name: str, *, quantity: str = "displacement", body: str | None = None,
+               point: object = (0, 0, 0), direction: object = "x", rotation: bool = False,
+               sensor: str | None = None, element: str | None = None, where: str | None = None) -> None:
+        """Declare an output: motion of a body point (or sensor) along a direction, or an elongation."""
+        where = self._here(where, "outputs", len(self._outputs))
+        self._claim("signals", name, where)
+        if quantity not in QUANTITIES:
+            msg = f"output {name!r} quantity must be one of {', '.join(QUANTITIES)}; got {quantity!r} ({where}.quantity)"
+            raise ModelError(msg)
+        if quantity == "elongation":
+            names = [e.name for e in self._elements]
+            if element not in names:
+                msg = f"output {name!r} refers to unknown element {element!r} ({where}.element); known: {', '.join(names) or 'none'}"
+                raise ModelError(msg)
+            if direction not in DIRECTIONS:
+                msg = f"output {name!r} elongation direction must be one of {', '.join(DIRECTIONS)}; got {direction!r} ({where}.direction)"
+                raise ModelError(msg)
+            self._outputs.append(Output(name=name, quantity=quantity, element=str(element),
+                                        element_direction=str(direction)))
+            return
+        if sensor is not None:
+            found = [s for s in self._sensors if s.name == sensor]
+            if not found:
+                msg = f"output {name!r} refers to unknown sensor {sensor!r} ({where}.sensor)"
+                raise ModelError(msg)
+            body_name, pt = found[0].body, found[0].point
+        else:
+            body_name = self._require_body(body, f"{where}.body", allow_ground=False)
+            pt = self._vector(point, f"{where}.point")
+        self._outputs.append(Output(name=name, quantity=quantity, body=body_name, point=pt,
+                                    direction=self._vector(direction, f"{where}.direction", unit=True),
+                                    rotation=bool(rotation)))
+
+    def sensor(self, name: str, *, body: str, point: object = (0, 0, 0), where: str | None = None) -> None:
+        """Declare a named sensor node on a body."""
+        where = self._here(where, "sensors", len(self._sensors))
+        self._claim("sensors", name, where)
+        body_name = self._require_body(body, f"{where}.body", allow_ground=False)
+        self._sensors.append(Sensor(name=name, body=body_name, point=self._vector(point, f"{where}.point")))
+
+    def build(self) -> Structure:
+        """Validate the whole and return the immutable Structure."""
+        if not self._bodies:
+            msg = f"model '{self.name}' has no bodies ({self.source or 'builder'})"
+            raise ModelError(msg)
+        groups = ("parameters", "axes", "bodies", "elements", "inputs", "outputs", "sensors")
+        structure = Structure(
+            name=self.name,
+            parameters=tuple(self._parameters),
+            axes=tuple(self._axes),
+            bodies=tuple(self._bodies),
+            elements=tuple(self._elements),
+            inputs=tuple(self._inputs),
+            outputs=tuple(self._outputs),
+            sensors=tuple(self._sensors),
+            description=self.description,
+            source=self.source,
+        )
+        index = {g: MappingProxyType({item.name: i for i, item in enumerate(getattr(structure, g))}) for g in groups}
+        object.__setattr__(structure, "_index", MappingProxyType(index))
+        return structure
+
+
+def _finite(value: object, what: str, where: str) -> float:
+    if isinstance(value, bool):
+        msg = f"{what} must be a number; got {value!r} ({where})"
+        raise ModelError(msg)
+    try:
+        number = float(value)  # type: ignore[arg-type]
+    except (TypeError, ValueError) as exc:
+        msg = f"{what} must be a number; got {value!r} ({where})"
+        raise ModelError(msg) from exc
+    if not math.isfinite(number):
+        msg = f"{what} must be finite; got {value!r} ({where})"
+        raise ModelError(msg)
+    return number
+

@@ -1,0 +1,287 @@
+"""Exact equations of motion of a Structure, as sympy matrices in the parameters and axis coordinates.
+
+``M q'' + (C + G) q' + (K + 1j H) q = B u`` for harmonic motion (H: hysteretic damping, G: gyroscopic,
+skew-symmetric). Each matrix is kept as a sum of *terms* ``coefficient * pattern``: the coefficient is an
+expression in the parameters (a stiffness, a mass, ``eta*k``), the pattern a sparse matrix that depends only
+on the geometry (and so on the axis coordinates). This is the affine structure that NumericModel exploits.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from functools import cached_property
+
+import sympy as sp
+
+from cappe.exceptions import ModelError
+from cappe.model._expressions import symbol
+from cappe.model.geometry import point_jacobian, skew
+from cappe.model.structure import DIRECTIONS, GROUND, Output, Structure
+
+__all__ = ["MATRIX_NAMES", "SymbolicModel", "Term", "derive"]
+
+MATRIX_NAMES = ("M", "C", "K", "G", "H")
+SparseRow = dict[int, sp.Expr]
+
+
+@dataclass(frozen=True)
+class Term:
+    """One additive term ``coefficient * pattern`` of a system matrix (pattern sparse: {(i, j): expr})."""
+
+    coefficient: sp.Expr
+    pattern: Mapping[tuple[int, int], sp.Expr]
+    source: str
+
+    def dense(self, n: int) -> sp.Matrix:
+        out = sp.zeros(n, n)
+        for (i, j), v in self.pattern.items():
+            out[i, j] += v
+        return out
+
+
+def derive(structure: Structure) -> SymbolicModel:
+    """Derive the exact symbolic model of ``structure`` (same as ``SymbolicModel(structure)``)."""
+    return SymbolicModel(structure)
+
+
+class SymbolicModel:
+    """Exact symbolic equations of motion of a Structure.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> sym = SymbolicModel(load_model("builtin:two-mass-rig"))
+    >>> sym.K
+    Matrix([
+    [k11 + k12,      -k12],
+    [     -k12, k12 + k22]])
+    """
+
+    def __init__(self, structure: Structure) -> None:
+        self.structure = structure
+        self.dofs = structure.dofs
+        self.n_dof = structure.n_dof
+        self._offset: dict[str, int] = {}
+        i = 0
+        for body in structure.bodies:
+            self._offset[body.name] = i
+            i += len(body.dofs)
+
+    # -- kinematics -------------------------------------------------------------------------------
+    def _columns(self, body: str) -> dict[str, int]:
+        """Map of DIRECTIONS index -> global DOF index for the active DOFs of ``body``."""
+        if body == GROUND:
+            return {}
+        b = self.structure.body(body)
+        start = self._offset[body]
+        return {DIRECTIONS.index(d): start + k for k, d in enumerate(b.dofs)}
+
+    def point_rows(self, body: str, point: Sequence[sp.Expr]) -> list[SparseRow]:
+        """Three sparse rows mapping q to the (x, y, z) displacement of a body point."""
+        cols = self._columns(body)
+        jac = point_jacobian(point)
+        rows: list[SparseRow] = []
+        for a in range(3):
+            row = {cols[c]: jac[a, c] for c in cols if jac[a, c] != 0}
+            rows.append(row)
+        return rows
+
+    def rotation_rows(self, body: str) -> list[SparseRow]:
+        """Three sparse rows mapping q to the small rotation (rx, ry, rz) of a body."""
+        cols = self._columns(body)
+        return [{cols[3 + a]: sp.Integer(1)} if 3 + a in cols else {} for a in range(3)]
+
+    def elongation_row(self, element: str, direction: str) -> SparseRow:
+        """Sparse row h with elongation = h q for one local direction of an element."""
+        e = self.structure.element(element)
+        k = DIRECTIONS.index(direction)
+        axis = e.axes[:, k % 3]
+        if k < 3:
+            rows_b = self.point_rows(e.body_b, e.point_b)
+            rows_a = self.point_rows(e.body_a, e.point_a)
+        else:
+            rows_b = self.rotation_rows(e.body_b)
+            rows_a = self.rotation_rows(e.body_a)
+        return _combine([(axis[a], rows_b[a]) for a in range(3)] + [(-axis[a], rows_a[a]) for a in range(3)])
+
+    def direction_row(self, body: str, point: Sequence[sp.Expr], direction: Sequence[sp.Expr],
+                      rotation: bool = False) -> SparseRow:
+        """Row mapping q to the motion of a body point along a unit direction (or rotation about it)."""
+        rows = self.rotation_rows(body) if rotation else self.point_rows(body, point)
+        return _combine([(direction[a], rows[a]) for a in range(3)])
+
+    # -- matrices as terms ------------------------------------------------------------------------
+    @cached_property
+    def terms(self) -> dict[str, list[Term]]:
+        """Additive terms of M, C, K, G and H."""
+        out: dict[str, list[Term]] = {name: [] for name in MATRIX_NAMES}
+        for body in self.structure.bodies:
+            out["M"].extend(self._mass_terms(body.name))
+            if body.spin is not None:
+                out["G"].append(self._gyro_term(body.name))
+        for e in self.structure.elements:
+            for d in e.directions:
+                h = self.elongation_row(e.name, d)
+                if not h:
+                    continue
+                pattern = _outer(h)
+                if d in e.stiffness and e.stiffness[d] != 0:
+                    out["K"].append(Term(e.stiffness[d], pattern, f"{e.name}.k{d}"))
+                if d in e.damping and e.damping[d] != 0:
+                    out["C"].append(Term(e.damping[d], pattern, f"{e.name}.c{d}"))
+                if d in e.loss and e.loss[d] != 0 and d in e.stiffness:
+                    out["H"].append(Term(e.loss[d] * e.stiffness[d], pattern, f"{e.name}.eta{d}"))
+        return out
+
+    def _mass_terms(self, name: str) -> list[Term]:
+        body = self.structure.body(name)
+        cols = self._columns(name)
+        c = body.com
+        sc = skew(c)
+        full = sp.zeros(6, 6)
+        full[:3, :3] = sp.eye(3)
+        full[:3, 3:] = -sc
+        full[3:, :3] = sc
+        full[3:, 3:] = -sc * sc
+        terms = [Term(body.mass, _restrict(full, cols), f"{name}.mass")]
+        for a in range(3):
+            for b in range(a, 3):
+                value = body.inertia[a, b]
+                if value == 0 or (3 + a) not in cols or (3 + b) not in cols:
+                    continue
+                pattern = {(cols[3 + a], cols[3 + b]): sp.Integer(1)}
+                if a != b:
+                    pattern[(cols[3 + b], cols[3 + a])] = sp.Integer(1)
+                terms.append(Term(value, pattern, f"{name}.I{'xyz'[a]}{'xyz'[b]}"))
+        return [t for t in terms if t.pattern]
+
+    def _gyro_term(self, name: str) -> Term:
+        spin = self.structure.body(name).spin
+        if spin is None:
+            msg = f"body {name!r} does not spin"
+            raise ModelError(msg)
+        block = sp.zeros(6, 6)
+        block[3:, 3:] = -skew(spin.axis)
+        return Term(spin.polar_inertia * spin.speed, _restrict(block, self._columns(name)), f"{name}.spin")
+
+    def _assemble(self, name: str) -> sp.ImmutableMatrix:
+        total = sp.zeros(self.n_dof, self.n_dof)
+        for term in self.terms[name]:
+            for (i, j), v in term.pattern.items():
+                total[i, j] += term.coefficient * v
+        return sp.ImmutableMatrix(total.applyfunc(sp.expand))
+
+    @cached_property
+    def M(self) -> sp.ImmutableMatrix:  # noqa: N802 (matrix names follow the literature)
+        """Mass matrix."""
+        return self._assemble("M")
+
+    @cached_property
+    def C(self) -> sp.ImmutableMatrix:  # noqa: N802
+        """Viscous damping matrix."""
+        return self._assemble("C")
+
+    @cached_property
+    def K(self) -> sp.ImmutableMatrix:  # noqa: N802
+        """Stiffness matrix."""
+        return self._assemble("K")
+
+    @cached_property
+    def G(self) -> sp.ImmutableMatrix:  # noqa: N802
+        """Gyroscopic matrix (skew-symmetric, proportional to spin speed)."""
+        return self._assemble("G")
+
+    @cached_property
+    def H(self) -> sp.ImmutableMatrix:  # noqa: N802
+        """Hysteretic damping matrix (imaginary part of the complex stiffness)."""
+        return self._assemble("H")
+
+    def matrices(self) -> dict[str, sp.ImmutableMatrix]:
+        return {name: getattr(self, name) for name in MATRIX_NAMES}
+
+    # -- inputs and outputs -----------------------------------------------------------------------
+    def input_column(self, name: str) -> SparseRow:
+        """Generalized force per unit input (sparse column)."""
+        inp = self.structure.input(name)
+        return self.direction_row(inp.body, inp.point, inp.direction, rotation=inp.kind == "moment")
+
+    def output_row(self, name: str) -> tuple[str, SparseRow]:
+        """(quantity, row) with the output's displacement-level value = row · q."""
+        out: Output = self.structure.output(name)
+        if out.quantity == "elongation":
+            return out.quantity, self.elongation_row(out.element, out.element_direction)
+        return out.quantity, self.direction_row(out.body, out.point, out.direction, rotation=out.rotation)
+
+    def sensor_rows(self, name: str) -> list[SparseRow]:
+        """Rows for the x, y, z displacement of a sensor node."""
+        s = self.structure.sensor(name)
+        return self.point_rows(s.body, s.point)
+
+    def input_matrix(self, inputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
+        names = list(inputs) if inputs is not None else [i.name for i in self.structure.inputs]
+        cols = [_dense_row(self.input_column(n), self.n_dof) for n in names]
+        return sp.ImmutableMatrix(sp.Matrix.hstack(*[c.T for c in cols])) if cols else sp.ImmutableMatrix(
+            sp.zeros(self.n_dof, 0))
+
+    def output_matrix(self, outputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
+        """Displacement-level output rows (the quantity of each output says how to differentiate)."""
+        names = list(outputs) if outputs is not None else [o.name for o in self.structure.outputs]
+        rows = [_dense_row(self.output_row(n)[1], self.n_dof) for n in names]
+        return sp.ImmutableMatrix(sp.Matrix.vstack(*rows)) if rows else sp.ImmutableMatrix(sp.zeros(0, self.n_dof))
+
+    # -- substitution -----------------------------------------------------------------------------
+    def substitute(self, values: Mapping[str, object]) -> dict[str, sp.ImmutableMatrix]:
+        """Matrices with the given parameter / axis values substituted (others stay symbolic)."""
+        subs = {symbol(k): sp.sympify(v) for k, v in values.items()}
+        return {k: sp.ImmutableMatrix(m.xreplace(subs)) for k, m in self.matrices().items()}
+
+    @property
+    def symbols(self) -> dict[str, sp.Symbol]:
+        """Parameter and axis symbols by name."""
+        names = list(self.structure.parameter_names) + list(self.structure.axis_names)
+        return {n: symbol(n) for n in names}
+
+    def check_signals(self) -> None:
+        """Raise ModelError if an input or output does not touch any active DOF."""
+        for inp in self.structure.inputs:
+            if not self.input_column(inp.name):
+                msg = (f"input {inp.name!r} acts only on inactive DOFs of body {inp.body!r} "
+                       f"(active: {', '.join(self.structure.body(inp.body).dofs)})")
+                raise ModelError(msg)
+        for out in self.structure.outputs:
+            if not self.output_row(out.name)[1]:
+                target = out.element or out.body
+                msg = f"output {out.name!r} sees only inactive DOFs of {target!r}"
+                raise ModelError(msg)
+
+
+def _combine(parts: Iterable[tuple[sp.Expr, SparseRow]]) -> SparseRow:
+    row: SparseRow = {}
+    for weight, r in parts:
+        if weight == 0:
+            continue
+        for j, v in r.items():
+            row[j] = row.get(j, sp.Integer(0)) + weight * v
+    return {j: sp.expand(v) for j, v in sorted(row.items()) if sp.expand(v) != 0}
+
+
+def _outer(h: SparseRow) -> dict[tuple[int, int], sp.Expr]:
+    return {(i, j): sp.expand(a * b) for i, a in h.items() for j, b in h.items()}
+
+
+def _restrict(block: sp.Matrix, cols: Mapping[int, int]) -> dict[tuple[int, int], sp.Expr]:
+    out: dict[tuple[int, int], sp.Expr] = {}
+    for a, i in cols.items():
+        for b, j in cols.items():
+            v = sp.expand(block[a, b])
+            if v != 0:
+                out[(i, j)] = v
+    return out
+
+
+def _dense_row(row: SparseRow, n: int) -> sp.Matrix:
+    out = sp.zeros(1, n)
+    for j, v in row.items():
+        out[0, j] = v
+    return out

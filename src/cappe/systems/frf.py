@@ -1,0 +1,50 @@
+"""Frequency response functions ``H[out, in, freq]``."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+__all__ = ["FRFData"]
+
+_UNITS = {"displacement": "m/N", "elongation": "m/N", "velocity": "m/s/N", "acceleration": "m/s^2/N"}
+
+
+@dataclass(frozen=True)
+class FRFData:
+    """Complex FRFs on a frequency grid.
+
+    Attributes
+    ----------
+    freq : ndarray, shape (n_freq,)
+        Frequencies in Hz.
+    H : ndarray, shape (n_out, n_in, n_freq)
+        Complex frequency responses.
+    """
+
+    freq: NDArray[np.float64]
+    H: NDArray[np.complex128]
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    output_quantities: tuple[str, ...] = ()
+
+    def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
+        """The FRF of one output/input pair."""
+        return self.H[self.output_names.index(output), self.input_names.index(input)]
+
+    def to_dict(self) -> dict[str, Any]:
+        pairs = []
+        for o, out in enumerate(self.output_names):
+            for i, inp in enumerate(self.input_names):
+                quantity = self.output_quantities[o] if self.output_quantities else "displacement"
+                pairs.append({
+                    "input": inp,
+                    "output": out,
+                    "unit": _UNITS.get(quantity, ""),
+                    "re": self.H[o, i].real.tolist(),
+                    "im": self.H[o, i].imag.tolist(),
+                })
+        return {"frequency": self.freq.tolist(), "frf": pairs}
