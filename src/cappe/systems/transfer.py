@@ -118,7 +118,8 @@ def transfer_function(ss: StateSpaceModel, input: str | None = None,  # noqa: A0
     k = g0 * np.prod(s0 - poles) / np.prod(s0 - zeros) if zeros.size else g0 * np.prod(s0 - poles)
     den = np.real_if_close(np.poly(poles), tol=1e6)
     num = np.real_if_close(k * np.poly(zeros), tol=1e6) if zeros.size else np.array([k])
-    num_r = np.real(num) if np.all(np.abs(np.imag(num)) <= 1e-9 * np.abs(num).max()) else num
+    # poles and zeros come in conjugate pairs, so the coefficients are real up to round-off
+    num_r = np.real(num)
     den_r = np.real(den)
     return TransferFunctionModel(tuple(float(x) for x in num_r), tuple(float(x) for x in den_r),
                                  ss.input_names[i], ss.output_names[o], "float")

@@ -1,0 +1,28 @@
+"""Exact rational and symbolic algebra: transfer-function coefficients, ranks, invertibility, cancellations."""
+
+from cappe.exact.rank import (
+    InvertibilityResult,
+    controllability_rank,
+    exact_rank,
+    float_rank,
+    invertibility_matrix,
+    observability_rank,
+    sain_massey,
+)
+from cappe.exact.rational import ExactStateSpace, exact_state_space, to_rational
+from cappe.exact.transfer import exact_transfer_function, symbolic_transfer_function
+
+__all__ = [
+    "ExactStateSpace",
+    "InvertibilityResult",
+    "controllability_rank",
+    "exact_rank",
+    "exact_state_space",
+    "exact_transfer_function",
+    "float_rank",
+    "invertibility_matrix",
+    "observability_rank",
+    "sain_massey",
+    "symbolic_transfer_function",
+    "to_rational",
+]
