@@ -1,0 +1,119 @@
+"""Shared CLI plumbing: model options, JSON output, errors and exit codes."""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+from cappe.exceptions import DataError, ModelError
+from cappe.io import read_parameters, write_json
+from cappe.model import NumericModel, Structure, load_model
+
+EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+
+
+class UsageError(Exception):
+    """A command-line argument is malformed (exit code 2)."""
+
+
+def add_output_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    parser.add_argument("-o", "--out", metavar="FILE", help="write the result to FILE (JSON)")
+
+
+def add_model_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
+    parser.add_argument("--params", metavar="FILE.json", help="parameter values {name: value} (SI)")
+    parser.add_argument("--set", dest="overrides", metavar="NAME=VALUE", action="append", default=[],
+                        help="override one parameter (repeatable)")
+    parser.add_argument("--position", metavar="AXIS=VALUE", action="append", default=[],
+                        help="axis position, e.g. z=0.135 (repeatable)")
+    add_output_options(parser)
+
+
+def _pairs(items: list[str], what: str) -> dict[str, float]:
+    out: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            msg = f"{what} must look like NAME=VALUE; got {item!r}"
+            raise UsageError(msg)
+        try:
+            number = float(value)
+        except ValueError as exc:
+            msg = f"{what} {name.strip()!r} must be a number; got {value!r}"
+            raise UsageError(msg) from exc
+        if not math.isfinite(number):
+            msg = f"{what} {name.strip()!r} must be finite; got {value!r}"
+            raise UsageError(msg)
+        out[name.strip()] = number
+    return out
+
+
+class ModelContext:
+    """The model, parameter values and position a command works on."""
+
+    def __init__(self, args: argparse.Namespace) -> None:
+        self.structure: Structure = load_model(args.model)
+        values: dict[str, float] = {}
+        if args.params:
+            values.update(read_parameters(args.params))
+        values.update(_pairs(args.overrides, "--set"))
+        self.values = self.structure.resolve_parameters(values)
+        self.overrides = values
+        self.position = self.structure.resolve_position(_pairs(args.position, "--position"))
+        self._numeric: NumericModel | None = None
+
+    @property
+    def numeric(self) -> NumericModel:
+        if self._numeric is None:
+            self._numeric = NumericModel(self.structure)
+        return self._numeric
+
+    def system(self) -> Any:
+        return self.numeric.system(self.values, self.position)
+
+
+def emit(args: argparse.Namespace, data: Mapping[str, Any], text: str) -> None:
+    """Print JSON or text, and write JSON to --out when asked."""
+    if getattr(args, "out", None):
+        write_json(args.out, data)
+    if getattr(args, "json", False):
+        print(json.dumps(data, indent=2, default=_default))
+    else:
+        print(text)
+
+
+def _default(obj: Any) -> Any:
+    if hasattr(obj, "tolist"):
+        return obj.tolist()
+    return str(obj)
+
+
+def run_guarded(func: Any, args: argparse.Namespace) -> int:
+    try:
+        return int(func(args) or EXIT_OK)
+    except UsageError as exc:
+        print(f"cappe: usage error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    except (ModelError, DataError) as exc:
+        print(f"cappe: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+    except OSError as exc:
+        print(f"cappe: error: {exc}", file=sys.stderr)
+        return EXIT_FAILURE
+
+
+def names(value: str | None) -> list[str] | None:
+    if value is None:
+        return None
+    return [v.strip() for v in value.split(",") if v.strip()]
+
+
+def path_arg(value: str) -> Path:
+    return Path(value)

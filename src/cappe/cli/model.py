@@ -1,0 +1,336 @@
+"""``cappe model show|matrices|modes|tf|zpk|ss|frf|check``: representations of a structure model."""
+
+from __future__ import annotations
+
+import argparse
+import warnings
+from typing import Any
+
+import numpy as np
+
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    parser = sub.add_parser("model", help="model representations: show, matrices, modes, tf, zpk, ss, frf, check")
+    cmds = parser.add_subparsers(dest="model_command", metavar="COMMAND", required=True)
+
+    p = cmds.add_parser("show", help="parameters, bodies, elements, inputs, outputs, sensors")
+    add_model_options(p)
+    p.set_defaults(func=show)
+
+    p = cmds.add_parser("matrices", help="M, C, K, G, H (numeric or --symbolic)")
+    add_model_options(p)
+    p.add_argument("--symbolic", action="store_true", help="expressions in the parameter names")
+    p.set_defaults(func=matrices)
+
+    p = cmds.add_parser("modes", help="natural frequencies, damping ratios, mode shapes")
+    add_model_options(p)
+    p.add_argument("--damping", choices=["exact", "first-order", "undamped"], default="exact")
+    p.set_defaults(func=modes)
+
+    for name, func, helptext in (("tf", tf, "transfer function (monic denominator, highest power first)"),
+                                 ("zpk", zpk_cmd, "zeros, poles and gain")):
+        p = cmds.add_parser(name, help=helptext)
+        add_model_options(p)
+        p.add_argument("--input", required=True, help="input name")
+        p.add_argument("--output", required=True, help="output name")
+        group = p.add_mutually_exclusive_group()
+        group.add_argument("--exact", action="store_true", help="exact rational coefficients")
+        group.add_argument("--symbolic", action="store_true", help="coefficients in the parameter names")
+        if name == "zpk":
+            p.add_argument("--plot", metavar="FILE.png", help="write a pole-zero map")
+        p.set_defaults(func=func)
+
+    p = cmds.add_parser("ss", help="state-space matrices, continuous or discrete")
+    add_model_options(p)
+    p.add_argument("--inputs", help="comma-separated inputs (default all)")
+    p.add_argument("--outputs", help="comma-separated outputs (default all)")
+    p.add_argument("--dt", type=float, help="sample time (s) for a discrete model")
+    p.add_argument("--method", choices=["zoh", "tustin"], default="zoh")
+    p.set_defaults(func=ss)
+
+    p = cmds.add_parser("frf", help="frequency response functions")
+    add_model_options(p)
+    p.add_argument("--inputs", help="comma-separated inputs (default all)")
+    p.add_argument("--outputs", help="comma-separated outputs (default all)")
+    p.add_argument("--fmin", type=float, default=None, help="lowest frequency (Hz)")
+    p.add_argument("--fmax", type=float, default=None, help="highest frequency (Hz)")
+    p.add_argument("--n", type=int, default=400, help="number of frequencies (log spaced)")
+    p.add_argument("--plot", metavar="FILE.png", help="write a Bode plot")
+    p.set_defaults(func=frf)
+
+    p = cmds.add_parser("check", help="validation, conditioning, rigid-body modes, exact invertibility")
+    add_model_options(p)
+    p.add_argument("--inputs", help="comma-separated inputs for the invertibility test (default all)")
+    p.add_argument("--outputs", help="comma-separated outputs for the invertibility test (default all)")
+    p.set_defaults(func=check)
+
+
+# -- show -------------------------------------------------------------------------------------------
+def show(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    s = ctx.structure
+    data = {
+        "name": s.name,
+        "n_dof": s.n_dof,
+        "dofs": list(s.dofs),
+        "positions": {a.name: list(a.positions) for a in s.axes},
+        "parameters": [{**p.to_dict(), "value": ctx.values[p.name]} for p in s.parameters],
+        "bodies": [{"name": b.name, "mass": str(b.mass), "dofs": list(b.dofs), "position": [str(v) for v in b.position],
+                    "spin": None if b.spin is None else {"speed": str(b.spin.speed), "polar_inertia": str(b.spin.polar_inertia)}}
+                   for b in s.bodies],
+        "elements": [{"name": e.name, "bodies": [e.body_a, e.body_b], "directions": list(e.directions),
+                      "stiffness": {d: str(v) for d, v in e.stiffness.items()},
+                      "damping": {d: str(v) for d, v in e.damping.items()},
+                      "loss": {d: str(v) for d, v in e.loss.items()}} for e in s.elements],
+        "inputs": [{"name": i.name, "kind": i.kind, "body": i.body, "point": [str(v) for v in i.point],
+                    "direction": [str(v) for v in i.direction]} for i in s.inputs],
+        "outputs": [{"name": o.name, "quantity": o.quantity,
+                     **({"element": o.element, "direction": o.element_direction} if o.element else
+                        {"body": o.body, "point": [str(v) for v in o.point], "direction": [str(v) for v in o.direction]})}
+                    for o in s.outputs],
+        "sensors": [{"name": n.name, "body": n.body, "point": [str(v) for v in n.point]} for n in s.sensors],
+    }
+    lines = [f"model {s.name}: {s.n_dof} DOF, {len(s.bodies)} bodies, {len(s.elements)} elements"]
+    if s.axes:
+        lines.append("axes: " + ", ".join(f"{a.name} at {list(a.positions)} {a.unit}" for a in s.axes))
+    lines.append("parameters:")
+    for p in s.parameters:
+        flags = " unknown" if p.unknown else (" disturbable" if p.disturbable else "")
+        bounds = f" [{p.bounds[0]:g}, {p.bounds[1]:g}]" if p.bounds else ""
+        lines.append(f"  {p.name:<10} {ctx.values[p.name]:>12.6g} {p.unit:<8} {p.kind:<9}{bounds}{flags}")
+    lines.append("dofs: " + " ".join(s.dofs))
+    lines.append("inputs: " + ", ".join(f"{i.name} ({i.kind} on {i.body})" for i in s.inputs))
+    lines.append("outputs: " + ", ".join(f"{o.name} ({o.quantity})" for o in s.outputs))
+    if s.sensors:
+        lines.append("sensors: " + ", ".join(n.name for n in s.sensors))
+    emit(args, data, "\n".join(lines))
+    return 0
+
+
+# -- matrices ---------------------------------------------------------------------------------------
+def matrices(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    if args.symbolic:
+        from cappe.model import derive
+
+        sym = derive(ctx.structure)
+        fixed = {k: v for k, v in ctx.position.items()} if ctx.structure.axes and args.position else {}
+        mats = sym.substitute(fixed) if fixed else sym.matrices()
+        data: dict[str, Any] = {"dofs": list(ctx.structure.dofs),
+                                "matrices": {k: [[str(v) for v in row] for row in m.tolist()] for k, m in mats.items()}}
+        text = "\n".join(f"{k} =\n{m}" for k, m in mats.items() if any(v != 0 for v in m))
+    else:
+        sys_ = ctx.system()
+        mats_n = {"M": sys_.M, "C": sys_.C, "K": sys_.K, "G": sys_.G, "H": sys_.H}
+        data = {"dofs": list(sys_.dofs), "position": ctx.position,
+                "matrices": {k: m.tolist() for k, m in mats_n.items()}}
+        with np.printoptions(precision=5, linewidth=160, suppress=False):
+            text = "dofs: " + " ".join(sys_.dofs) + "\n" + "\n".join(
+                f"{k} =\n{m}" for k, m in mats_n.items() if np.any(m))
+    emit(args, data, text)
+    return 0
+
+
+# -- modes ------------------------------------------------------------------------------------------
+def modes(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    result = ctx.system().modes(args.damping)
+    data = result.to_dict()
+    data["position"] = ctx.position
+    lines = [f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
+             f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF"]
+    for r in range(result.n_modes):
+        k = int(np.argmax(np.abs(result.shapes[:, r])))
+        tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
+        lines.append(f"{r + 1:>4} {result.frequency[r]:>15.3f} {100 * result.damping[r]:>12.4f}  {result.dofs[k]}{tag}")
+    emit(args, data, "\n".join(lines))
+    return 0
+
+
+# -- tf / zpk ---------------------------------------------------------------------------------------
+def _transfer(ctx: ModelContext, args: argparse.Namespace) -> Any:
+    from cappe.exact import exact_transfer_function, symbolic_transfer_function
+    from cappe.model import derive
+    from cappe.systems import transfer_function
+
+    s = ctx.structure
+    s.input(args.input)
+    s.output(args.output)
+    if args.exact or args.symbolic:
+        sym = derive(s)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            if args.exact:
+                result = exact_transfer_function(sym, args.input, args.output, ctx.values, ctx.position)
+            else:
+                fixed = {k: v for k, v in ctx.overrides.items()}
+                result = symbolic_transfer_function(sym, args.input, args.output, fixed,
+                                                    ctx.position if s.axes and args.position else None)
+        for w in caught:
+            print(f"cappe: warning: {w.message}", file=__import__("sys").stderr)
+        return result
+    return transfer_function(ctx.system().state_space(args.input, args.output), args.input, args.output)
+
+
+def _poly_text(coefs: tuple[Any, ...], kind: str) -> str:
+    n = len(coefs) - 1
+    terms = []
+    for k, c in enumerate(coefs):
+        power = n - k
+        if kind == "float":
+            if c == 0:
+                continue
+            value = f"{float(c):.6g}"
+        else:
+            if c == 0:
+                continue
+            value = f"({c})"
+        terms.append(value + ("" if power == 0 else (" s" if power == 1 else f" s^{power}")))
+    return " + ".join(terms) if terms else "0"
+
+
+def tf(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    result = _transfer(ctx, args)
+    num = _poly_text(result.numerator, result.kind)
+    den = _poly_text(result.denominator, result.kind)
+    text = f"G({args.output}/{args.input})(s) =\n  numerator:   {num}\n  denominator: {den}"
+    if result.cancelled:
+        text += "\n  exact pole-zero cancellation removed: " + ", ".join(result.cancelled)
+    emit(args, result.to_dict(), text)
+    return 0
+
+
+def zpk_cmd(args: argparse.Namespace) -> int:
+    from cappe.systems import zpk
+
+    ctx = ModelContext(args)
+    if args.symbolic:
+        msg = "zpk needs numbers; use --exact or plain float"
+        raise UsageError(msg)
+    model = zpk(_transfer(ctx, args))
+    data = model.to_dict()
+    if args.plot:
+        from cappe.report import pole_zero_plot
+
+        pole_zero_plot(model, args.plot, f"{ctx.structure.name}: {args.output}/{args.input}")
+        data["plot"] = args.plot
+
+    def fmt(v: np.ndarray) -> str:  # type: ignore[type-arg]
+        return ", ".join(f"{z.real:.6g}{z.imag:+.6g}j" for z in v) or "none"
+
+    text = f"zeros (rad/s): {fmt(model.zeros)}\npoles (rad/s): {fmt(model.poles)}\ngain: {model.gain:.6g}"
+    emit(args, data, text)
+    return 0
+
+
+# -- ss ---------------------------------------------------------------------------------------------
+def ss(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    model = ctx.system().state_space(names(args.inputs), names(args.outputs))
+    if args.dt is not None:
+        model = model.discretize(args.dt, args.method)
+    with np.printoptions(precision=5, linewidth=160):
+        text = "\n".join([
+            f"{'discrete (' + model.method + f', dt = {model.dt:g} s)' if model.is_discrete else 'continuous'}"
+            f" state space, {model.n_states} states",
+            "states: " + " ".join(model.state_names),
+            f"A =\n{model.A}", f"B =\n{model.B}", f"C =\n{model.C}", f"D =\n{model.D}",
+        ])
+    emit(args, model.to_dict(), text)
+    return 0
+
+
+# -- frf --------------------------------------------------------------------------------------------
+def frf(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    system = ctx.system()
+    undamped = system.modes("undamped").frequency
+    elastic = undamped[undamped > 0]
+    fmin = args.fmin if args.fmin is not None else (max(elastic.min() / 10, 0.1) if elastic.size else 1.0)
+    fmax = args.fmax if args.fmax is not None else (elastic.max() * 2 if elastic.size else 1000.0)
+    if not 0 < fmin < fmax:
+        msg = f"need 0 < --fmin < --fmax; got {fmin:g} and {fmax:g}"
+        raise UsageError(msg)
+    if args.n < 2:
+        msg = f"--n must be at least 2; got {args.n}"
+        raise UsageError(msg)
+    freq = np.geomspace(fmin, fmax, args.n)
+    result = system.frf(freq, names(args.inputs), names(args.outputs))
+    data = result.to_dict()
+    if args.plot:
+        from cappe.report import bode_plot
+
+        bode_plot(result, args.plot, ctx.structure.name)
+        data["plot"] = args.plot
+    peaks = []
+    for o, out in enumerate(result.output_names):
+        for i, inp in enumerate(result.input_names):
+            mag = np.abs(result.H[o, i])
+            k = int(np.argmax(mag))
+            peaks.append(f"{out}/{inp}: max |H| = {mag[k]:.4g} at {freq[k]:.2f} Hz")
+    text = f"FRF on {args.n} frequencies from {fmin:g} to {fmax:g} Hz\n" + "\n".join(peaks)
+    emit(args, data, text)
+    return 0
+
+
+# -- check ------------------------------------------------------------------------------------------
+def check(args: argparse.Namespace) -> int:
+    from cappe.exact import controllability_rank, exact_state_space, observability_rank, sain_massey
+    from cappe.model import derive
+
+    ctx = ModelContext(args)
+    system = ctx.system()
+    lam, phi = system.undamped_modes()
+    rigid = [r for r in range(lam.size) if lam[r] == 0]
+    rigid_modes = []
+    for r in rigid:
+        shape = phi[:, r] / np.abs(phi[:, r]).max()
+        rigid_modes.append({d: round(float(v), 6) for d, v in zip(system.dofs, shape, strict=True) if abs(v) > 1e-9})
+    cond_m = float(np.linalg.cond(system.M))
+    cond_k = float(np.linalg.cond(system.K)) if not rigid else float("inf")
+    ins = names(args.inputs) or list(ctx.numeric.input_names)
+    outs = names(args.outputs) or list(ctx.numeric.output_names)
+    for n in ins:
+        ctx.structure.input(n)
+    for n in outs:
+        ctx.structure.output(n)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        exact_ss = exact_state_space(derive(ctx.structure), ctx.values, ctx.position, ins, outs)
+    inv = sain_massey(exact_ss)
+    ctrb = controllability_rank(exact_ss)
+    obsv = observability_rank(exact_ss)
+    data = {
+        "valid": True,
+        "n_dof": system.n_dof,
+        "condition": {"M": cond_m, "K": cond_k if np.isfinite(cond_k) else None},
+        "rigid_body_modes": rigid_modes,
+        "inputs": ins,
+        "outputs": outs,
+        "invertibility": inv.to_dict(),
+        "controllability_rank": ctrb,
+        "observability_rank": obsv,
+        "n_states": exact_ss.A.rows,
+    }
+    lines = [f"model {ctx.structure.name}: valid, {system.n_dof} DOF",
+             f"condition number: M {cond_m:.3g}, K " + (f"{cond_k:.3g}" if np.isfinite(cond_k) else "inf (singular)")]
+    if rigid_modes:
+        lines.append(f"{len(rigid_modes)} rigid-body mode(s) (unconstrained DOFs):")
+        lines.extend("  " + ", ".join(f"{d} {v:+.3f}" for d, v in m.items()) for m in rigid_modes)
+    else:
+        lines.append("no rigid-body modes: every DOF is constrained")
+    lines.append(f"inputs {', '.join(ins)} -> outputs {', '.join(outs)}: {exact_ss.A.rows} states")
+    lines.append(f"  controllability rank {ctrb}, observability rank {obsv} (exact)")
+    lines.append(f"  Sain-Massey M_n {inv.matrix_shape[0]}x{inv.matrix_shape[1]}: exact ranks "
+                 f"{inv.exact_ranks[1]} / {inv.exact_ranks[0]} -> {'invertible' if inv.invertible_exact else 'NOT invertible'}")
+    lines.append(f"  (double precision ranks {inv.float_ranks[1]} / {inv.float_ranks[0]} -> "
+                 f"{'invertible' if inv.invertible_float else 'not invertible'}"
+                 f"{'; float rank is wrong here' if inv.invertible_float != inv.invertible_exact else ''})")
+    emit(args, data, "\n".join(lines))
+    return 0
+
+
+__all__ = ["register"]
