@@ -1,0 +1,200 @@
+"""Reference derivation of M, C, K and G from energies (Lagrange's equations), for validation only.
+
+:class:`cappe.model.symbolic.SymbolicModel` writes the matrices down in closed form from the point
+Jacobians ``[I, -[r]x]``. This module derives them a second, independent way: every body gets its full
+nonlinear pose ``R(q) = Rx(rx) Ry(ry) Rz(rz)`` (:mod:`cappe.model.geometry`), and the matrices are the
+second derivatives at ``q = 0`` of
+
+* the kinetic energy ``T = 1/2 m |v_com|^2 + 1/2 w^T (R I R^T) w`` with ``[w]x = R' R^T``; a spinning
+  body adds its spin ``Omega R n`` to ``w`` (the rotor spins about its own axis, which turns with the body),
+* the potential energy ``V = 1/2 sum k_d l_d(q)^2``,
+* the Rayleigh dissipation function ``D = 1/2 sum c_d (dl_d/dt)^2``,
+
+where ``l_d`` is an element's elongation in its local direction ``d``: ``e_d . (P_b(q) - P_a(q) -
+(P_b(0) - P_a(0)))`` for a translation, ``e_d . vee(skew(R_a^T R_b))`` for a rotation (exact to first order,
+and not built on the small-angle formula). Then
+
+``M = d2T/dqd2``, ``K = d2V/dq2``, ``C = d2D/dqd2`` and ``G = N - N^T`` with ``N_ij = d2T/(dqd_i dq_j)``,
+
+all at ``q = qd = 0``. Time derivatives use the chain rule ``d/dt f(q) = sum_i df/dq_i qd_i``.
+
+Everything is exact and symbolic, so the cost grows quickly with the number of DOFs: this is for small
+models, tests and model checks, not for hot paths. The hysteretic matrix H is not derived here (it is not
+an energy term; it is ``sum eta k h^T h`` with the same ``h`` as K).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+
+import sympy as sp
+
+from cappe.exceptions import ModelError
+from cappe.model.geometry import rotation_x, rotation_y, rotation_z
+from cappe.model.structure import DIRECTIONS, GROUND, Body, StiffnessDampingElement, Structure
+
+__all__ = ["lagrange_matrices"]
+
+
+@dataclass(frozen=True)
+class _Pose:
+    """Nonlinear pose of one body (or of ground) as functions of the generalized coordinates."""
+
+    origin: sp.Matrix  # 3x1, global position of the body origin
+    rotation: sp.Matrix  # 3x3, body frame -> global frame
+
+    def point(self, p: Sequence[sp.Expr]) -> sp.Matrix:
+        """Global position of a point given in the body frame."""
+        return self.origin + self.rotation * sp.Matrix(p)
+
+
+def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
+    """Derive M, C, K and G of ``structure`` from its energies (independent reference).
+
+    Parameters
+    ----------
+    structure : Structure
+        The model. Every spinning body must be axisymmetric about its spin axis, with
+        ``inertia @ n == polar_inertia * n`` (the derivation adds the spin to the angular velocity, which
+        gives the usual gyroscopic matrix only for such a rotor).
+
+    Returns
+    -------
+    dict[str, sympy.Matrix]
+        ``{"M": ..., "C": ..., "K": ..., "G": ...}``, square in ``structure.n_dof``, rows and columns in
+        ``structure.dofs`` order, entries expanded expressions in the parameter and axis symbols.
+
+    Raises
+    ------
+    ModelError
+        If a spinning body is not axisymmetric about its spin axis.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> lagrange_matrices(load_model("builtin:two-mass-rig"))["K"]
+    Matrix([
+    [k11 + k12,      -k12],
+    [     -k12, k12 + k22]])
+    """
+    q: list[sp.Symbol] = []
+    qd: list[sp.Symbol] = []
+    ground = _Pose(sp.zeros(3, 1), sp.eye(3))
+    poses: dict[str, _Pose] = {GROUND: ground}
+    nominal: dict[str, _Pose] = {GROUND: ground}
+    for body in structure.bodies:
+        full: list[sp.Expr] = []
+        for d in DIRECTIONS:
+            if d in body.dofs:
+                # Dummy symbols cannot collide with parameter or axis names.
+                q.append(sp.Dummy(f"q_{body.name}_{d}", real=True))
+                qd.append(sp.Dummy(f"qd_{body.name}_{d}", real=True))
+                full.append(q[-1])
+            else:
+                full.append(sp.Integer(0))
+        poses[body.name] = _pose(body, full)
+        nominal[body.name] = _pose(body, [sp.Integer(0)] * 6)
+
+    def dt(expr: sp.Matrix) -> sp.Matrix:
+        """Time derivative by the chain rule (q depends on time only through q itself)."""
+        out = sp.zeros(*expr.shape)
+        for qi, qdi in zip(q, qd, strict=True):
+            out += expr.diff(qi) * qdi
+        return out
+
+    at_rest = {s: sp.Integer(0) for s in q}
+    at_rest_qd = {s: sp.Integer(0) for s in qd}
+
+    kinetic = sp.Integer(0)
+    for body in structure.bodies:
+        kinetic += _kinetic_energy(body, poses[body.name], dt)
+
+    potential = sp.Integer(0)
+    dissipation = sp.Integer(0)
+    for element in structure.elements:
+        for d in element.directions:
+            stiffness = element.stiffness.get(d, sp.Integer(0))
+            damping = element.damping.get(d, sp.Integer(0))
+            if stiffness == 0 and damping == 0:
+                continue
+            elongation = _elongation(element, d, poses, nominal)
+            potential += stiffness * elongation**2 / 2
+            rate = dt(sp.Matrix([elongation]))[0, 0]
+            dissipation += damping * rate**2 / 2
+
+    n = len(q)
+    mass = sp.zeros(n, n)
+    stiffness_matrix = sp.zeros(n, n)
+    damping_matrix = sp.zeros(n, n)
+    coupling = sp.zeros(n, n)
+    # T and D are quadratic in qd, so q can be set to 0 before differentiating with respect to qd.
+    kinetic_rest = kinetic.xreplace(at_rest)
+    dissipation_rest = dissipation.xreplace(at_rest)
+    grad_v = [potential.diff(qj) for qj in q]
+    grad_t = [kinetic.diff(qj).xreplace(at_rest) for qj in q]
+    for i in range(n):
+        for j in range(n):
+            mass[i, j] = kinetic_rest.diff(qd[i], qd[j])
+            damping_matrix[i, j] = dissipation_rest.diff(qd[i], qd[j])
+            stiffness_matrix[i, j] = grad_v[j].diff(q[i]).xreplace(at_rest)
+            coupling[i, j] = grad_t[j].diff(qd[i]).xreplace(at_rest_qd)
+    result = {
+        "M": mass,
+        "C": damping_matrix,
+        "K": stiffness_matrix,
+        "G": coupling - coupling.T,
+    }
+    return {name: matrix.applyfunc(sp.expand) for name, matrix in result.items()}
+
+
+def _pose(body: Body, full: Sequence[sp.Expr]) -> _Pose:
+    """Pose of ``body`` for ``full = (x, y, z, rx, ry, rz)`` (inactive entries 0)."""
+    x, y, z, rx, ry, rz = full
+    rotation = (rotation_x(rx) * rotation_y(ry) * rotation_z(rz))[:3, :3]
+    origin = sp.Matrix(body.position) + sp.Matrix([x, y, z])
+    return _Pose(origin, rotation)
+
+
+def _vee(w: sp.Matrix) -> sp.Matrix:
+    """Vector of the skew-symmetric part of a 3x3 matrix (``vee([a]x) == a``)."""
+    return sp.Matrix([w[2, 1] - w[1, 2], w[0, 2] - w[2, 0], w[1, 0] - w[0, 1]]) / 2
+
+
+def _kinetic_energy(body: Body, pose: _Pose, dt: Callable[[sp.Matrix], sp.Matrix]) -> sp.Expr:
+    """Kinetic energy of one body: translation of the centre of mass plus rotation about it."""
+    rotation = pose.rotation
+    velocity = dt(pose.point(body.com))
+    omega = _vee(dt(rotation) * rotation.T)
+    if body.spin is not None:
+        n = sp.Matrix(body.spin.axis)
+        residue = sp.simplify(body.inertia * n - body.spin.polar_inertia * n)
+        if residue != sp.zeros(3, 1):
+            msg = (
+                f"body {body.name!r}: the reference derivation needs a rotor axisymmetric about its spin "
+                f"axis (inertia @ n == polar_inertia * n); got inertia @ n - polar_inertia * n = {list(residue)}"
+            )
+            raise ModelError(msg)
+        omega = omega + body.spin.speed * rotation * n
+    inertia = rotation * sp.Matrix(body.inertia) * rotation.T
+    translational = body.mass * (velocity.T * velocity)[0, 0] / 2
+    rotational = (omega.T * inertia * omega)[0, 0] / 2
+    return translational + rotational
+
+
+def _elongation(element: StiffnessDampingElement, direction: str, poses: Mapping[str, _Pose],
+                nominal: Mapping[str, _Pose]) -> sp.Expr:
+    """Nonlinear elongation of ``element`` in its local ``direction`` (zero at q = 0).
+
+    ``poses`` are the bodies' poses as functions of q, ``nominal`` the same poses at q = 0.
+    """
+    k = DIRECTIONS.index(direction)
+    axis = sp.Matrix(element.axes[:, k % 3])
+    pose_a, pose_b = poses[element.body_a], poses[element.body_b]
+    if k < 3:
+        gap = pose_b.point(element.point_b) - pose_a.point(element.point_a)
+        gap_0 = nominal[element.body_b].point(element.point_b) - nominal[element.body_a].point(element.point_a)
+        return (axis.T * (gap - gap_0))[0, 0]
+    relative = pose_a.rotation.T * pose_b.rotation
+    return (axis.T * _vee(relative))[0, 0]
+

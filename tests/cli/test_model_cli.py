@@ -1,0 +1,185 @@
+"""The CLI through main(argv), and one real subprocess run of each command the README documents."""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from cappe.cli import main
+from cappe.model._expressions import symbol
+
+README = Path(__file__).resolve().parents[2] / "README.md"
+
+
+def run(capsys, *argv):
+    code = main(list(argv))
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_show_json_contract(capsys):
+    code, out, _ = run(capsys, "model", "show", "builtin:two-mass-rig", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert set(data) >= {"name", "n_dof", "dofs", "positions", "parameters", "bodies", "elements", "inputs",
+                         "outputs", "sensors"}
+    assert [p["name"] for p in data["parameters"]] == ["m1", "m2", "k11", "k12", "k22", "c11", "c12", "c22"]
+    assert set(data["parameters"][0]) == {"name", "value", "unit", "kind", "bounds", "unknown", "disturbable"}
+    assert data["n_dof"] == 2
+
+
+def test_tf_json_contract_matches_closed_form(capsys):
+    code, out, _ = run(capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d1", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["input"] == "F1"
+    assert data["output"] == "d1"
+    m1, m2, k11, k12, k22, c11, c12, c22 = 1.39, 1.09, 1.38e6, 0.12e6, 0.24e6, 13.42, 0.0, 0.47
+    expected_num = [1 / m1, (c12 + c22) / (m1 * m2), (k12 + k22) / (m1 * m2)]  # thesis eq. 5.8, b2 = 1/m1
+    expected_den = [1, (c12 * m1 + c22 * m1 + c11 * m2 + c12 * m2) / (m1 * m2),
+                    (c11 * c12 + c11 * c22 + c12 * c22 + k12 * m1 + k22 * m1 + k11 * m2 + k12 * m2) / (m1 * m2),
+                    (c12 * k11 + c22 * k11 + c11 * k12 + c22 * k12 + c11 * k22 + c12 * k22) / (m1 * m2),
+                    (k11 * k12 + k11 * k22 + k12 * k22) / (m1 * m2)]
+    # float TF from poles/zeros/gain: agreement to ~1e-9 relative (eigenvalue round-off on 1e11-scale coefficients)
+    np.testing.assert_allclose(data["numerator"], expected_num, rtol=1e-8)
+    np.testing.assert_allclose(data["denominator"], expected_den, rtol=1e-8)
+
+
+def test_tf_exact_and_symbolic(capsys):
+    code, out, _ = run(capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--exact", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["numerator"] == [str(sp.Rational(120000, 1) / (sp.Rational(139, 100) * sp.Rational(109, 100)))]
+    code, out, _ = run(capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--symbolic",
+                       "--json")
+    data = json.loads(out)
+    m1, m2, k12, c12 = (symbol(n) for n in ("m1", "m2", "k12", "c12"))
+    parsed = [sp.sympify(c, locals={"m1": m1, "m2": m2, "k12": k12, "c12": c12}) for c in data["numerator"]]
+    assert sp.simplify(parsed[0] - c12 / (m1 * m2)) == 0
+    assert sp.simplify(parsed[1] - k12 / (m1 * m2)) == 0
+
+
+def test_modes_json_ascending_and_overrides(capsys, tmp_path):
+    params = tmp_path / "p.json"
+    params.write_text(json.dumps({"k12": 0.2e6}))
+    code, out, _ = run(capsys, "model", "modes", "builtin:two-mass-rig", "--params", str(params), "--set", "m1=1.5",
+                       "--json", "-o", str(tmp_path / "modes.json"))
+    assert code == 0
+    data = json.loads(out)
+    freqs = [m["frequency"] for m in data["modes"]]
+    assert freqs == sorted(freqs)
+    # independent: undamped frequencies from the 2x2 eigenproblem with the overridden values
+    m = np.diag([1.5, 1.09])
+    k = np.array([[1.38e6 + 0.2e6, -0.2e6], [-0.2e6, 0.2e6 + 0.24e6]])
+    w = np.sqrt(np.sort(np.linalg.eigvals(np.linalg.solve(m, k)).real)) / (2 * np.pi)
+    np.testing.assert_allclose(freqs, w, rtol=1e-4)  # light damping shifts |lambda| by < 1e-5
+    assert json.loads((tmp_path / "modes.json").read_text())["modes"][0]["frequency"] == freqs[0]
+
+
+def test_modes_first_order_and_undamped(capsys):
+    for damping in ("first-order", "undamped"):
+        code, out, _ = run(capsys, "model", "modes", "builtin:spindle-bearing", "--damping", damping, "--json")
+        assert code == 0
+        assert len(json.loads(out)["modes"]) == 11
+
+
+def test_check_dynamometer_reports_exact_invertibility(capsys):
+    code, out, _ = run(capsys, "model", "check", "builtin:dynamometer-plate", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["invertibility"]["exact"] == {"rank_M_n_minus_1": 60, "rank_M_n": 66, "invertible": True}
+    assert data["invertibility"]["float"]["invertible"] is False
+    assert data["rigid_body_modes"] == []
+
+
+def test_check_reports_rigid_body_modes(capsys, tmp_path):
+    model = tmp_path / "free.yaml"
+    model.write_text(
+        "format: cappe.model/1\nname: free\nparameters:\n  - {name: m, value: 1.0, kind: mass}\n"
+        "  - {name: k, value: 100.0, kind: stiffness}\nbodies:\n  - {name: a, mass: m, dofs: [x]}\n"
+        "  - {name: b, mass: m, dofs: [x]}\nelements:\n  - {name: s, bodies: [a, b], stiffness: {x: k}}\n"
+        "inputs:\n  - {name: F, body: a}\noutputs:\n  - {name: d, body: b}\n")
+    code, out, _ = run(capsys, "model", "check", str(model), "--json")
+    assert code == 0
+    modes = json.loads(out)["rigid_body_modes"]
+    assert len(modes) == 1
+    assert modes[0]["a.x"] == pytest.approx(modes[0]["b.x"])  # both masses translate together
+
+
+def test_frf_and_zpk_plots(capsys, tmp_path):
+    bode = tmp_path / "bode.png"
+    code, out, _ = run(capsys, "model", "frf", "builtin:two-mass-rig", "--inputs", "F1", "--outputs", "d1",
+                       "--fmin", "10", "--fmax", "400", "--n", "50", "--plot", str(bode), "--json")
+    assert code == 0
+    assert bode.stat().st_size > 1000
+    data = json.loads(out)
+    assert len(data["frequency"]) == 50
+    pz = tmp_path / "pz.png"
+    code, out, _ = run(capsys, "model", "zpk", "builtin:two-mass-rig", "--input", "F1", "--output", "d1", "--plot",
+                       str(pz), "--json")
+    assert code == 0
+    assert pz.stat().st_size > 1000
+    assert len(json.loads(out)["poles"]) == 4
+
+
+def test_ss_discrete(capsys):
+    code, out, _ = run(capsys, "model", "ss", "builtin:two-mass-rig", "--inputs", "F1", "--outputs", "d1,a1",
+                       "--dt", "1e-4", "--method", "tustin", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["dt"] == 1e-4
+    assert np.array(data["A"]).shape == (4, 4)
+
+
+@pytest.mark.parametrize(
+    ("argv", "code", "match"),
+    [
+        (["model", "modes", "builtin:nope"], 1, r"unknown built-in model 'nope'"),
+        (["model", "modes", "builtin:two-mass-rig", "--set", "m9=1"], 1, r"unknown parameter 'm9'"),
+        (["model", "modes", "builtin:two-mass-rig", "--set", "m1"], 2, r"--set must look like NAME=VALUE"),
+        (["model", "modes", "builtin:two-mass-rig", "--set", "m1=abc"], 2, r"--set 'm1' must be a number"),
+        (["model", "modes", "builtin:two-mass-rig", "--position", "z=1"], 1, r"unknown axis 'z'"),
+        (["model", "tf", "builtin:two-mass-rig", "--input", "F9", "--output", "d1"], 1, r"no input named 'F9'"),
+        (["model", "modes", "builtin:two-mass-rig", "--params", "/nonexistent.json"], 1, r"cannot read parameter file"),
+        (["model", "frf", "builtin:two-mass-rig", "--fmin", "100", "--fmax", "10"], 2, r"need 0 < --fmin < --fmax"),
+    ],
+)
+def test_errors_and_exit_codes(capsys, argv, code, match):
+    got, _, err = run(capsys, *argv)
+    assert got == code
+    assert re.search(match, err)
+
+
+def test_unknown_command_is_usage_error(capsys):
+    assert main(["model", "frobnicate"]) == 2
+
+
+def _readme_commands() -> list[str]:
+    return [line[2:].strip() for line in README.read_text().splitlines() if line.startswith("$ cappe ")]
+
+
+def test_readme_documents_commands():
+    assert len(_readme_commands()) >= 6
+
+
+@pytest.mark.parametrize("command", _readme_commands())
+def test_readme_command_runs_as_subprocess(command):
+    cappe = Path(sys.executable).with_name("cappe")
+    argv = [str(cappe), *command.split()[1:]]
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=120, check=False)
+    assert result.returncode == 0, result.stderr
+
+
+def test_demo_prints_modes_and_tfs(capsys):
+    code, out, _ = run(capsys, "demo")
+    assert code == 0
+    assert "G11(s)" in out
+    assert "G21(s)" in out
+    assert out.count("mode ") >= 13  # 2 two-mass modes + 11 spindle modes
