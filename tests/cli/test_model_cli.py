@@ -28,8 +28,18 @@ def test_show_json_contract(capsys):
     code, out, _ = run(capsys, "model", "show", "builtin:two-mass-rig", "--json")
     assert code == 0
     data = json.loads(out)
-    assert set(data) >= {"name", "n_dof", "dofs", "positions", "parameters", "bodies", "elements", "inputs",
-                         "outputs", "sensors"}
+    assert set(data) >= {
+        "name",
+        "n_dof",
+        "dofs",
+        "positions",
+        "parameters",
+        "bodies",
+        "elements",
+        "inputs",
+        "outputs",
+        "sensors",
+    }
     assert [p["name"] for p in data["parameters"]] == ["m1", "m2", "k11", "k12", "k22", "c11", "c12", "c22"]
     assert set(data["parameters"][0]) == {"name", "value", "unit", "kind", "bounds", "unknown", "disturbable"}
     assert data["n_dof"] == 2
@@ -43,22 +53,28 @@ def test_tf_json_contract_matches_closed_form(capsys):
     assert data["output"] == "d1"
     m1, m2, k11, k12, k22, c11, c12, c22 = 1.39, 1.09, 1.38e6, 0.12e6, 0.24e6, 13.42, 0.0, 0.47
     expected_num = [1 / m1, (c12 + c22) / (m1 * m2), (k12 + k22) / (m1 * m2)]  # thesis eq. 5.8, b2 = 1/m1
-    expected_den = [1, (c12 * m1 + c22 * m1 + c11 * m2 + c12 * m2) / (m1 * m2),
-                    (c11 * c12 + c11 * c22 + c12 * c22 + k12 * m1 + k22 * m1 + k11 * m2 + k12 * m2) / (m1 * m2),
-                    (c12 * k11 + c22 * k11 + c11 * k12 + c22 * k12 + c11 * k22 + c12 * k22) / (m1 * m2),
-                    (k11 * k12 + k11 * k22 + k12 * k22) / (m1 * m2)]
+    expected_den = [
+        1,
+        (c12 * m1 + c22 * m1 + c11 * m2 + c12 * m2) / (m1 * m2),
+        (c11 * c12 + c11 * c22 + c12 * c22 + k12 * m1 + k22 * m1 + k11 * m2 + k12 * m2) / (m1 * m2),
+        (c12 * k11 + c22 * k11 + c11 * k12 + c22 * k12 + c11 * k22 + c12 * k22) / (m1 * m2),
+        (k11 * k12 + k11 * k22 + k12 * k22) / (m1 * m2),
+    ]
     # float TF from poles/zeros/gain: agreement to ~1e-9 relative (eigenvalue round-off on 1e11-scale coefficients)
     np.testing.assert_allclose(data["numerator"], expected_num, rtol=1e-8)
     np.testing.assert_allclose(data["denominator"], expected_den, rtol=1e-8)
 
 
 def test_tf_exact_and_symbolic(capsys):
-    code, out, _ = run(capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--exact", "--json")
+    code, out, _ = run(
+        capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--exact", "--json"
+    )
     assert code == 0
     data = json.loads(out)
     assert data["numerator"] == [str(sp.Rational(120000, 1) / (sp.Rational(139, 100) * sp.Rational(109, 100)))]
-    code, out, _ = run(capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--symbolic",
-                       "--json")
+    code, out, _ = run(
+        capsys, "model", "tf", "builtin:two-mass-rig", "--input", "F1", "--output", "d2", "--symbolic", "--json"
+    )
     data = json.loads(out)
     m1, m2, k12, c12 = (symbol(n) for n in ("m1", "m2", "k12", "c12"))
     parsed = [sp.sympify(c, locals={"m1": m1, "m2": m2, "k12": k12, "c12": c12}) for c in data["numerator"]]
@@ -69,8 +85,19 @@ def test_tf_exact_and_symbolic(capsys):
 def test_modes_json_ascending_and_overrides(capsys, tmp_path):
     params = tmp_path / "p.json"
     params.write_text(json.dumps({"k12": 0.2e6}))
-    code, out, _ = run(capsys, "model", "modes", "builtin:two-mass-rig", "--params", str(params), "--set", "m1=1.5",
-                       "--json", "-o", str(tmp_path / "modes.json"))
+    code, out, _ = run(
+        capsys,
+        "model",
+        "modes",
+        "builtin:two-mass-rig",
+        "--params",
+        str(params),
+        "--set",
+        "m1=1.5",
+        "--json",
+        "-o",
+        str(tmp_path / "modes.json"),
+    )
     assert code == 0
     data = json.loads(out)
     freqs = [m["frequency"] for m in data["modes"]]
@@ -105,7 +132,8 @@ def test_check_reports_rigid_body_modes(capsys, tmp_path):
         "format: cappe.model/1\nname: free\nparameters:\n  - {name: m, value: 1.0, kind: mass}\n"
         "  - {name: k, value: 100.0, kind: stiffness}\nbodies:\n  - {name: a, mass: m, dofs: [x]}\n"
         "  - {name: b, mass: m, dofs: [x]}\nelements:\n  - {name: s, bodies: [a, b], stiffness: {x: k}}\n"
-        "inputs:\n  - {name: F, body: a}\noutputs:\n  - {name: d, body: b}\n")
+        "inputs:\n  - {name: F, body: a}\noutputs:\n  - {name: d, body: b}\n"
+    )
     code, out, _ = run(capsys, "model", "check", str(model), "--json")
     assert code == 0
     modes = json.loads(out)["rigid_body_modes"]
@@ -115,23 +143,54 @@ def test_check_reports_rigid_body_modes(capsys, tmp_path):
 
 def test_frf_and_zpk_plots(capsys, tmp_path):
     bode = tmp_path / "bode.png"
-    code, out, _ = run(capsys, "model", "frf", "builtin:two-mass-rig", "--inputs", "F1", "--outputs", "d1",
-                       "--fmin", "10", "--fmax", "400", "--n", "50", "--plot", str(bode), "--json")
+    code, out, _ = run(
+        capsys,
+        "model",
+        "frf",
+        "builtin:two-mass-rig",
+        "--inputs",
+        "F1",
+        "--outputs",
+        "d1",
+        "--fmin",
+        "10",
+        "--fmax",
+        "400",
+        "--n",
+        "50",
+        "--plot",
+        str(bode),
+        "--json",
+    )
     assert code == 0
     assert bode.stat().st_size > 1000
     data = json.loads(out)
     assert len(data["frequency"]) == 50
     pz = tmp_path / "pz.png"
-    code, out, _ = run(capsys, "model", "zpk", "builtin:two-mass-rig", "--input", "F1", "--output", "d1", "--plot",
-                       str(pz), "--json")
+    code, out, _ = run(
+        capsys, "model", "zpk", "builtin:two-mass-rig", "--input", "F1", "--output", "d1", "--plot", str(pz), "--json"
+    )
     assert code == 0
     assert pz.stat().st_size > 1000
     assert len(json.loads(out)["poles"]) == 4
 
 
 def test_ss_discrete(capsys):
-    code, out, _ = run(capsys, "model", "ss", "builtin:two-mass-rig", "--inputs", "F1", "--outputs", "d1,a1",
-                       "--dt", "1e-4", "--method", "tustin", "--json")
+    code, out, _ = run(
+        capsys,
+        "model",
+        "ss",
+        "builtin:two-mass-rig",
+        "--inputs",
+        "F1",
+        "--outputs",
+        "d1,a1",
+        "--dt",
+        "1e-4",
+        "--method",
+        "tustin",
+        "--json",
+    )
     assert code == 0
     data = json.loads(out)
     assert data["dt"] == 1e-4

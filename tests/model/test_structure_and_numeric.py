@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from cappe.model import NumericModel, StructureBuilder, derive, load_model
+from cappe.model import NumericModel, StructureBuilder, derive
 from cappe.model._expressions import symbol
 from cappe.model.loader import structure_from_yaml
 
@@ -47,12 +47,23 @@ def build_with_api():
     b.parameter("eta", 0.02, unit="1", kind="loss")
     b.axis("z", [-0.2, 0.0, 0.3])
     b.body("base", mass="4*m", inertia={"xx": "4*J", "yy": "4*J", "zz": "2*J"})
-    b.body("table", mass="m", inertia={"xx": "J", "yy": "J", "zz": "J", "xy": "J/10"}, position=[0, 0, "z"],
-           com=[0.01, 0, 0])
+    b.body(
+        "table",
+        mass="m",
+        inertia={"xx": "J", "yy": "J", "zz": "J", "xy": "J/10"},
+        position=[0, 0, "z"],
+        com=[0.01, 0, 0],
+    )
     six = {d: "kg" if d in "xyz" else "kt" for d in ("x", "y", "z", "rx", "ry", "rz")}
     b.element("mount", bodies=("ground", "base"), at=[0, -0.1, 0], stiffness=six, damping={"x": "c", "y": "c"})
-    b.element("shoe", bodies=("base", "table"), at=[0.05, 0, "z"], axes={"x": [1, 1, 0], "y": [0, 0, 1]},
-              stiffness=six, loss={"x": "eta", "y": "eta"})
+    b.element(
+        "shoe",
+        bodies=("base", "table"),
+        at=[0.05, 0, "z"],
+        axes={"x": [1, 1, 0], "y": [0, 0, 1]},
+        stiffness=six,
+        loss={"x": "eta", "y": "eta"},
+    )
     b.input("F", body="table", point=[0, 0, 0.02], direction=[1, 0, 0])
     b.output("d", quantity="displacement", body="table", point=[0, 0, 0.02], direction="x")
     b.output("a", quantity="acceleration", body="base", direction="y")
@@ -130,32 +141,79 @@ def thesis_k(corrected: bool) -> sp.Matrix:
     b = kfy * (z0 - z2)
     s = -1 if corrected else 1  # the four upper-triangle x/rotation signs are wrong in the appendix
     k = sp.zeros(11, 11)
-    k[0, 0] = 2 * kfx; k[0, 3] = -2 * kfx; k[0, 7] = -s * a; k[0, 9] = s * a  # noqa: E702
-    k[1, 1] = 2 * kfy; k[1, 4] = -2 * kfy; k[1, 6] = -b; k[1, 8] = b  # noqa: E702
-    k[2, 2] = kfz; k[2, 5] = -kfz  # noqa: E702
-    k[3, 0] = -2 * kfx; k[3, 3] = 2 * kfx + 4 * k1x; k[3, 7] = s * a; k[3, 9] = -s * a; k[3, 10] = 4 * k1x * yh0  # noqa: E702
-    k[4, 1] = -2 * kfy; k[4, 4] = 2 * kfy + 4 * k1y; k[4, 6] = b; k[4, 8] = -b  # noqa: E702
-    k[5, 2] = -kfz; k[5, 5] = kfz + 4 * k1z; k[5, 8] = -4 * k1z * yh0  # noqa: E702
-    k[6, 1] = -b; k[6, 4] = b; k[6, 6] = kfy * (z0**2 + z2**2); k[6, 8] = -kfy * (z0**2 + z2**2)  # noqa: E702
-    k[7, 0] = a; k[7, 3] = -a; k[7, 7] = kfx * (z0**2 + z2**2); k[7, 9] = -kfx * (z0**2 + z2**2)  # noqa: E702
-    k[8, 1] = b; k[8, 4] = -b; k[8, 5] = -4 * k1z * yh0; k[8, 6] = -kfy * (z0**2 + z2**2)  # noqa: E702
-    k[8, 8] = 4 * k1z * yh0**2 + (4 if corrected else 2) * k1y * zh0**2 + (1 if corrected else 2) * kfy * (z0**2 + z2**2)
-    k[9, 0] = -a; k[9, 3] = a; k[9, 7] = -kfx * (z0**2 + z2**2)  # noqa: E702
+    k[0, 0] = 2 * kfx
+    k[0, 3] = -2 * kfx
+    k[0, 7] = -s * a
+    k[0, 9] = s * a  # noqa: E702
+    k[1, 1] = 2 * kfy
+    k[1, 4] = -2 * kfy
+    k[1, 6] = -b
+    k[1, 8] = b  # noqa: E702
+    k[2, 2] = kfz
+    k[2, 5] = -kfz  # noqa: E702
+    k[3, 0] = -2 * kfx
+    k[3, 3] = 2 * kfx + 4 * k1x
+    k[3, 7] = s * a
+    k[3, 9] = -s * a
+    k[3, 10] = 4 * k1x * yh0  # noqa: E702
+    k[4, 1] = -2 * kfy
+    k[4, 4] = 2 * kfy + 4 * k1y
+    k[4, 6] = b
+    k[4, 8] = -b  # noqa: E702
+    k[5, 2] = -kfz
+    k[5, 5] = kfz + 4 * k1z
+    k[5, 8] = -4 * k1z * yh0  # noqa: E702
+    k[6, 1] = -b
+    k[6, 4] = b
+    k[6, 6] = kfy * (z0**2 + z2**2)
+    k[6, 8] = -kfy * (z0**2 + z2**2)  # noqa: E702
+    k[7, 0] = a
+    k[7, 3] = -a
+    k[7, 7] = kfx * (z0**2 + z2**2)
+    k[7, 9] = -kfx * (z0**2 + z2**2)  # noqa: E702
+    k[8, 1] = b
+    k[8, 4] = -b
+    k[8, 5] = -4 * k1z * yh0
+    k[8, 6] = -kfy * (z0**2 + z2**2)  # noqa: E702
+    k[8, 8] = (
+        4 * k1z * yh0**2 + (4 if corrected else 2) * k1y * zh0**2 + (1 if corrected else 2) * kfy * (z0**2 + z2**2)
+    )
+    k[9, 0] = -a
+    k[9, 3] = a
+    k[9, 7] = -kfx * (z0**2 + z2**2)  # noqa: E702
     k[9, 9] = 4 * k1z * xh0**2 + 4 * k1x * zh0**2 + kfx * z0**2 + (1 if corrected else 2) * kfx * z2**2
-    k[10, 3] = 4 * k1x * yh0; k[10, 10] = 4 * k1y * xh0**2 + 4 * k1x * yh0**2  # noqa: E702
+    k[10, 3] = 4 * k1x * yh0
+    k[10, 10] = 4 * k1y * xh0**2 + 4 * k1x * yh0**2  # noqa: E702
     return k
 
 
 def spindle_k_in_thesis_symbols(spindle) -> sp.Matrix:
     sym = derive(spindle)
     kfx, kfy, kfz, k1x, k1y, k1z = sp.symbols("kFX kFY kFZ kH1X kH1Y kH1Z")
-    subs = {symbol("preload"): 1, symbol("kfx"): kfx, symbol("krx"): kfx, symbol("kfy"): kfy, symbol("kry"): kfy,
-            symbol("kfz"): kfz}
+    subs = {
+        symbol("preload"): 1,
+        symbol("kfx"): kfx,
+        symbol("krx"): kfx,
+        symbol("kfy"): kfy,
+        symbol("kry"): kfy,
+        symbol("kfz"): kfz,
+    }
     for j in range(1, 5):
         subs.update({symbol(f"kh{j}x"): k1x, symbol(f"kh{j}y"): k1y, symbol(f"kh{j}z"): k1z})
     # cappe orders spindle dofs first (x y z rx ry), then housing (x y z rx ry rz); the thesis interleaves
-    order = ["spindle.x", "spindle.y", "spindle.z", "housing.x", "housing.y", "housing.z",
-             "spindle.rx", "spindle.ry", "housing.rx", "housing.ry", "housing.rz"]
+    order = [
+        "spindle.x",
+        "spindle.y",
+        "spindle.z",
+        "housing.x",
+        "housing.y",
+        "housing.z",
+        "spindle.rx",
+        "spindle.ry",
+        "housing.rx",
+        "housing.ry",
+        "housing.rz",
+    ]
     idx = [sym.dofs.index(d) for d in order]
     return sym.K.xreplace(subs).extract(idx, idx)
 

@@ -42,24 +42,62 @@ def test_base_model_is_valid():
 @pytest.mark.parametrize(
     ("old", "new", "match"),
     [
-        ("stiffness: {x: k, y: k", "stiffness: {x: kk, y: k", r"unknown name 'kk'.*model\.yaml, elements\[0\]\.stiffness\.x"),
-        ("{name: c, value: 10.0", "{name: k, value: 10.0", r"duplicate parameter name 'k' \(model\.yaml, parameters\[2\]\)"),
-        ("bodies: [ground, b1]", "bodies: [ground, b9]", r"unknown body 'b9' \(model\.yaml, elements\[0\]\.bodies\[1\]\); known bodies: b1"),
-        ("{name: F, body: b1, direction: x}", "{name: F, body: b1, direction: [0, 0, 0]}",
-         r"direction must have non-zero length; got \[0, 0, 0\] \(model\.yaml, inputs\[0\]\.direction\)"),
-        ("{name: m, value: 2.0", "{name: m, value: -2.0", r"parameter 'm' \(mass\) must be > 0; got -2\.0 \(model\.yaml, parameters\[0\]\)"),
+        (
+            "stiffness: {x: k, y: k",
+            "stiffness: {x: kk, y: k",
+            r"unknown name 'kk'.*model\.yaml, elements\[0\]\.stiffness\.x",
+        ),
+        (
+            "{name: c, value: 10.0",
+            "{name: k, value: 10.0",
+            r"duplicate parameter name 'k' \(model\.yaml, parameters\[2\]\)",
+        ),
+        (
+            "bodies: [ground, b1]",
+            "bodies: [ground, b9]",
+            r"unknown body 'b9' \(model\.yaml, elements\[0\]\.bodies\[1\]\); known bodies: b1",
+        ),
+        (
+            "{name: F, body: b1, direction: x}",
+            "{name: F, body: b1, direction: [0, 0, 0]}",
+            r"direction must have non-zero length; got \[0, 0, 0\] \(model\.yaml, inputs\[0\]\.direction\)",
+        ),
+        (
+            "{name: m, value: 2.0",
+            "{name: m, value: -2.0",
+            r"parameter 'm' \(mass\) must be > 0; got -2\.0 \(model\.yaml, parameters\[0\]\)",
+        ),
         ("mass: m,", "mass: -m,", r"body 'b1' mass must be > 0; got -2 \(model\.yaml, bodies\[0\]\.mass\)"),
-        ("stiffness: {x: k,", "stiffness: {x: -k,", r"element 'e1' stiffness 'x' must be >= 0; got -1e\+06 \(model\.yaml, elements\[0\]\.stiffness\.x\)"),
-        ("inertia: {xx: 0.1, yy: 0.2, zz: 0.3}", "inertia: {xx: 0.1, yy: 0.2, zz: 0.3, xy: 0.5}",
-         r"body 'b1' inertia tensor must be positive definite; eigenvalues .* \(model\.yaml, bodies\[0\]\.inertia\)"),
-        ("value: 1.0e6, unit: N/m, kind: stiffness, bounds: [1.0e5, 1.0e7]", "value: 1.0e6, unit: N/m, kind: stiffness, bounds: [1.0e7, 1.0e5]",
-         r"bounds must satisfy lo < hi; got \[10000000\.0, 100000\.0\]"),
-        ("{name: c, value: 10.0, unit: N s/m, kind: damping}", "{name: c, value: 10.0, unit: N s/m, kind: dampin}",
-         r"kind must be one of mass, inertia, .*; got 'dampin' \(model\.yaml, parameters\[2\]\)"),
-        ("{name: d, quantity: displacement", "{name: d, quantity: displacment",
-         r"quantity must be one of displacement, velocity, acceleration, elongation; got 'displacment'"),
-        ("{name: F, body: b1, direction: x}", "{name: F, body: b1, direction: x, colour: red}",
-         r"model\.yaml, inputs\[0\]: unknown key\(s\) colour"),
+        (
+            "stiffness: {x: k,",
+            "stiffness: {x: -k,",
+            r"element 'e1' stiffness 'x' must be >= 0; got -1e\+06 \(model\.yaml, elements\[0\]\.stiffness\.x\)",
+        ),
+        (
+            "inertia: {xx: 0.1, yy: 0.2, zz: 0.3}",
+            "inertia: {xx: 0.1, yy: 0.2, zz: 0.3, xy: 0.5}",
+            r"body 'b1' inertia tensor must be positive definite; eigenvalues .* \(model\.yaml, bodies\[0\]\.inertia\)",
+        ),
+        (
+            "value: 1.0e6, unit: N/m, kind: stiffness, bounds: [1.0e5, 1.0e7]",
+            "value: 1.0e6, unit: N/m, kind: stiffness, bounds: [1.0e7, 1.0e5]",
+            r"bounds must satisfy lo < hi; got \[10000000\.0, 100000\.0\]",
+        ),
+        (
+            "{name: c, value: 10.0, unit: N s/m, kind: damping}",
+            "{name: c, value: 10.0, unit: N s/m, kind: dampin}",
+            r"kind must be one of mass, inertia, .*; got 'dampin' \(model\.yaml, parameters\[2\]\)",
+        ),
+        (
+            "{name: d, quantity: displacement",
+            "{name: d, quantity: displacment",
+            r"quantity must be one of displacement, velocity, acceleration, elongation; got 'displacment'",
+        ),
+        (
+            "{name: F, body: b1, direction: x}",
+            "{name: F, body: b1, direction: x, colour: red}",
+            r"model\.yaml, inputs\[0\]: unknown key\(s\) colour",
+        ),
     ],
 )
 def test_rule_violations_are_named(old, new, match):

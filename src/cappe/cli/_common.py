@@ -29,10 +29,17 @@ def add_output_options(parser: argparse.ArgumentParser) -> None:
 def add_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
     parser.add_argument("--params", metavar="FILE.json", help="parameter values {name: value} (SI)")
-    parser.add_argument("--set", dest="overrides", metavar="NAME=VALUE", action="append", default=[],
-                        help="override one parameter (repeatable)")
-    parser.add_argument("--position", metavar="AXIS=VALUE", action="append", default=[],
-                        help="axis position, e.g. z=0.135 (repeatable)")
+    parser.add_argument(
+        "--set",
+        dest="overrides",
+        metavar="NAME=VALUE",
+        action="append",
+        default=[],
+        help="override one parameter (repeatable)",
+    )
+    parser.add_argument(
+        "--position", metavar="AXIS=VALUE", action="append", default=[], help="axis position, e.g. z=0.135 (repeatable)"
+    )
     add_output_options(parser)
 
 

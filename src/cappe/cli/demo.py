@@ -40,8 +40,12 @@ def run(args: argparse.Namespace) -> int:
         lines.append("  numerator:   " + "  |  ".join(str(c) for c in g.numerator))
         lines.append("  denominator: " + "  |  ".join(str(c) for c in g.denominator))
         num = transfer_function(system.state_space("F1", out), "F1", out)
-        lines.append("  numeric:     num " + " ".join(f"{c:.6g}" for c in num.numerator)
-                     + " ; den " + " ".join(f"{c:.6g}" for c in num.denominator))
+        lines.append(
+            "  numeric:     num "
+            + " ".join(f"{c:.6g}" for c in num.numerator)
+            + " ; den "
+            + " ".join(f"{c:.6g}" for c in num.denominator)
+        )
         data[f"G{out[1]}1"] = {"symbolic": g.to_dict(), "numeric": num.to_dict()}
 
     spindle = NumericModel(load_model("builtin:spindle-bearing")).system()
@@ -51,8 +55,9 @@ def run(args: argparse.Namespace) -> int:
     lines.append(f"{sm.n_modes} modes (exact complex):")
     for r in range(sm.n_modes):
         k = int(np.argmax(np.abs(sm.shapes[:, r])))
-        lines.append(f"  mode {r + 1:>2}: {sm.frequency[r]:9.2f} Hz, damping {100 * sm.damping[r]:6.3f} %, "
-                     f"dominant {sm.dofs[k]}")
+        lines.append(
+            f"  mode {r + 1:>2}: {sm.frequency[r]:9.2f} Hz, damping {100 * sm.damping[r]:6.3f} %, dominant {sm.dofs[k]}"
+        )
     data["spindle_modes"] = [{"frequency": m["frequency"], "damping": m["damping"]} for m in sm.to_dict()["modes"]]
     elapsed = time.perf_counter() - start
     lines.append(f"\ndone in {elapsed:.2f} s")

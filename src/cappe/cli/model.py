@@ -29,8 +29,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--damping", choices=["exact", "first-order", "undamped"], default="exact")
     p.set_defaults(func=modes)
 
-    for name, func, helptext in (("tf", tf, "transfer function (monic denominator, highest power first)"),
-                                 ("zpk", zpk_cmd, "zeros, poles and gain")):
+    for name, func, helptext in (
+        ("tf", tf, "transfer function (monic denominator, highest power first)"),
+        ("zpk", zpk_cmd, "zeros, poles and gain"),
+    ):
         p = cmds.add_parser(name, help=helptext)
         add_model_options(p)
         p.add_argument("--input", required=True, help="input name")
@@ -77,19 +79,55 @@ def show(args: argparse.Namespace) -> int:
         "dofs": list(s.dofs),
         "positions": {a.name: list(a.positions) for a in s.axes},
         "parameters": [{**p.to_dict(), "value": ctx.values[p.name]} for p in s.parameters],
-        "bodies": [{"name": b.name, "mass": str(b.mass), "dofs": list(b.dofs), "position": [str(v) for v in b.position],
-                    "spin": None if b.spin is None else {"speed": str(b.spin.speed), "polar_inertia": str(b.spin.polar_inertia)}}
-                   for b in s.bodies],
-        "elements": [{"name": e.name, "bodies": [e.body_a, e.body_b], "directions": list(e.directions),
-                      "stiffness": {d: str(v) for d, v in e.stiffness.items()},
-                      "damping": {d: str(v) for d, v in e.damping.items()},
-                      "loss": {d: str(v) for d, v in e.loss.items()}} for e in s.elements],
-        "inputs": [{"name": i.name, "kind": i.kind, "body": i.body, "point": [str(v) for v in i.point],
-                    "direction": [str(v) for v in i.direction]} for i in s.inputs],
-        "outputs": [{"name": o.name, "quantity": o.quantity,
-                     **({"element": o.element, "direction": o.element_direction} if o.element else
-                        {"body": o.body, "point": [str(v) for v in o.point], "direction": [str(v) for v in o.direction]})}
-                    for o in s.outputs],
+        "bodies": [
+            {
+                "name": b.name,
+                "mass": str(b.mass),
+                "dofs": list(b.dofs),
+                "position": [str(v) for v in b.position],
+                "spin": None
+                if b.spin is None
+                else {"speed": str(b.spin.speed), "polar_inertia": str(b.spin.polar_inertia)},
+            }
+            for b in s.bodies
+        ],
+        "elements": [
+            {
+                "name": e.name,
+                "bodies": [e.body_a, e.body_b],
+                "directions": list(e.directions),
+                "stiffness": {d: str(v) for d, v in e.stiffness.items()},
+                "damping": {d: str(v) for d, v in e.damping.items()},
+                "loss": {d: str(v) for d, v in e.loss.items()},
+            }
+            for e in s.elements
+        ],
+        "inputs": [
+            {
+                "name": i.name,
+                "kind": i.kind,
+                "body": i.body,
+                "point": [str(v) for v in i.point],
+                "direction": [str(v) for v in i.direction],
+            }
+            for i in s.inputs
+        ],
+        "outputs": [
+            {
+                "name": o.name,
+                "quantity": o.quantity,
+                **(
+                    {"element": o.element, "direction": o.element_direction}
+                    if o.element
+                    else {
+                        "body": o.body,
+                        "point": [str(v) for v in o.point],
+                        "direction": [str(v) for v in o.direction],
+                    }
+                ),
+            }
+            for o in s.outputs
+        ],
         "sensors": [{"name": n.name, "body": n.body, "point": [str(v) for v in n.point]} for n in s.sensors],
     }
     lines = [f"model {s.name}: {s.n_dof} DOF, {len(s.bodies)} bodies, {len(s.elements)} elements"]
@@ -118,17 +156,23 @@ def matrices(args: argparse.Namespace) -> int:
         sym = derive(ctx.structure)
         fixed = {k: v for k, v in ctx.position.items()} if ctx.structure.axes and args.position else {}
         mats = sym.substitute(fixed) if fixed else sym.matrices()
-        data: dict[str, Any] = {"dofs": list(ctx.structure.dofs),
-                                "matrices": {k: [[str(v) for v in row] for row in m.tolist()] for k, m in mats.items()}}
+        data: dict[str, Any] = {
+            "dofs": list(ctx.structure.dofs),
+            "matrices": {k: [[str(v) for v in row] for row in m.tolist()] for k, m in mats.items()},
+        }
         text = "\n".join(f"{k} =\n{m}" for k, m in mats.items() if any(v != 0 for v in m))
     else:
         sys_ = ctx.system()
         mats_n = {"M": sys_.M, "C": sys_.C, "K": sys_.K, "G": sys_.G, "H": sys_.H}
-        data = {"dofs": list(sys_.dofs), "position": ctx.position,
-                "matrices": {k: m.tolist() for k, m in mats_n.items()}}
+        data = {
+            "dofs": list(sys_.dofs),
+            "position": ctx.position,
+            "matrices": {k: m.tolist() for k, m in mats_n.items()},
+        }
         with np.printoptions(precision=5, linewidth=160, suppress=False):
-            text = "dofs: " + " ".join(sys_.dofs) + "\n" + "\n".join(
-                f"{k} =\n{m}" for k, m in mats_n.items() if np.any(m))
+            text = (
+                "dofs: " + " ".join(sys_.dofs) + "\n" + "\n".join(f"{k} =\n{m}" for k, m in mats_n.items() if np.any(m))
+            )
     emit(args, data, text)
     return 0
 
@@ -139,8 +183,10 @@ def modes(args: argparse.Namespace) -> int:
     result = ctx.system().modes(args.damping)
     data = result.to_dict()
     data["position"] = ctx.position
-    lines = [f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
-             f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF"]
+    lines = [
+        f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
+        f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF",
+    ]
     for r in range(result.n_modes):
         k = int(np.argmax(np.abs(result.shapes[:, r])))
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
@@ -166,8 +212,9 @@ def _transfer(ctx: ModelContext, args: argparse.Namespace) -> Any:
                 result = exact_transfer_function(sym, args.input, args.output, ctx.values, ctx.position)
             else:
                 fixed = {k: v for k, v in ctx.overrides.items()}
-                result = symbolic_transfer_function(sym, args.input, args.output, fixed,
-                                                    ctx.position if s.axes and args.position else None)
+                result = symbolic_transfer_function(
+                    sym, args.input, args.output, fixed, ctx.position if s.axes and args.position else None
+                )
         for w in caught:
             print(f"cappe: warning: {w.message}", file=__import__("sys").stderr)
         return result
@@ -233,12 +280,17 @@ def ss(args: argparse.Namespace) -> int:
     if args.dt is not None:
         model = model.discretize(args.dt, args.method)
     with np.printoptions(precision=5, linewidth=160):
-        text = "\n".join([
-            f"{'discrete (' + model.method + f', dt = {model.dt:g} s)' if model.is_discrete else 'continuous'}"
-            f" state space, {model.n_states} states",
-            "states: " + " ".join(model.state_names),
-            f"A =\n{model.A}", f"B =\n{model.B}", f"C =\n{model.C}", f"D =\n{model.D}",
-        ])
+        text = "\n".join(
+            [
+                f"{'discrete (' + model.method + f', dt = {model.dt:g} s)' if model.is_discrete else 'continuous'}"
+                f" state space, {model.n_states} states",
+                "states: " + " ".join(model.state_names),
+                f"A =\n{model.A}",
+                f"B =\n{model.B}",
+                f"C =\n{model.C}",
+                f"D =\n{model.D}",
+            ]
+        )
     emit(args, model.to_dict(), text)
     return 0
 
@@ -315,8 +367,10 @@ def check(args: argparse.Namespace) -> int:
         "observability_rank": obsv,
         "n_states": exact_ss.A.rows,
     }
-    lines = [f"model {ctx.structure.name}: valid, {system.n_dof} DOF",
-             f"condition number: M {cond_m:.3g}, K " + (f"{cond_k:.3g}" if np.isfinite(cond_k) else "inf (singular)")]
+    lines = [
+        f"model {ctx.structure.name}: valid, {system.n_dof} DOF",
+        f"condition number: M {cond_m:.3g}, K " + (f"{cond_k:.3g}" if np.isfinite(cond_k) else "inf (singular)"),
+    ]
     if rigid_modes:
         lines.append(f"{len(rigid_modes)} rigid-body mode(s) (unconstrained DOFs):")
         lines.extend("  " + ", ".join(f"{d} {v:+.3f}" for d, v in m.items()) for m in rigid_modes)
@@ -324,11 +378,15 @@ def check(args: argparse.Namespace) -> int:
         lines.append("no rigid-body modes: every DOF is constrained")
     lines.append(f"inputs {', '.join(ins)} -> outputs {', '.join(outs)}: {exact_ss.A.rows} states")
     lines.append(f"  controllability rank {ctrb}, observability rank {obsv} (exact)")
-    lines.append(f"  Sain-Massey M_n {inv.matrix_shape[0]}x{inv.matrix_shape[1]}: exact ranks "
-                 f"{inv.exact_ranks[1]} / {inv.exact_ranks[0]} -> {'invertible' if inv.invertible_exact else 'NOT invertible'}")
-    lines.append(f"  (double precision ranks {inv.float_ranks[1]} / {inv.float_ranks[0]} -> "
-                 f"{'invertible' if inv.invertible_float else 'not invertible'}"
-                 f"{'; float rank is wrong here' if inv.invertible_float != inv.invertible_exact else ''})")
+    lines.append(
+        f"  Sain-Massey M_n {inv.matrix_shape[0]}x{inv.matrix_shape[1]}: exact ranks "
+        f"{inv.exact_ranks[1]} / {inv.exact_ranks[0]} -> {'invertible' if inv.invertible_exact else 'NOT invertible'}"
+    )
+    lines.append(
+        f"  (double precision ranks {inv.float_ranks[1]} / {inv.float_ranks[0]} -> "
+        f"{'invertible' if inv.invertible_float else 'not invertible'}"
+        f"{'; float rank is wrong here' if inv.invertible_float != inv.invertible_exact else ''})"
+    )
     emit(args, data, "\n".join(lines))
     return 0
 

@@ -52,7 +52,7 @@ def invertibility_matrix(ss: ExactStateSpace, k: int) -> sp.Matrix:
     out = sp.zeros((k + 1) * r, (k + 1) * m)
     for i in range(k + 1):
         for j in range(i + 1):
-            out[i * r:(i + 1) * r, j * m:(j + 1) * m] = markov[i - j]
+            out[i * r : (i + 1) * r, j * m : (j + 1) * m] = markov[i - j]
     return out
 
 
@@ -77,12 +77,20 @@ class InvertibilityResult:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "n_states": self.n_states, "n_inputs": self.n_inputs, "n_outputs": self.n_outputs,
+            "n_states": self.n_states,
+            "n_inputs": self.n_inputs,
+            "n_outputs": self.n_outputs,
             "matrix_shape": list(self.matrix_shape),
-            "exact": {"rank_M_n_minus_1": self.exact_ranks[0], "rank_M_n": self.exact_ranks[1],
-                      "invertible": self.invertible_exact},
-            "float": {"rank_M_n_minus_1": self.float_ranks[0], "rank_M_n": self.float_ranks[1],
-                      "invertible": self.invertible_float},
+            "exact": {
+                "rank_M_n_minus_1": self.exact_ranks[0],
+                "rank_M_n": self.exact_ranks[1],
+                "invertible": self.invertible_exact,
+            },
+            "float": {
+                "rank_M_n_minus_1": self.float_ranks[0],
+                "rank_M_n": self.float_ranks[1],
+                "invertible": self.invertible_float,
+            },
         }
 
 
@@ -93,7 +101,9 @@ def sain_massey(ss: ExactStateSpace) -> InvertibilityResult:
     r, m = ss.D.shape
     m_prev = m_n[: n * r, : n * m]
     return InvertibilityResult(
-        n_states=n, n_inputs=m, n_outputs=r,
+        n_states=n,
+        n_inputs=m,
+        n_outputs=r,
         exact_ranks=(exact_rank(m_prev), exact_rank(m_n)),
         float_ranks=(float_rank(m_prev), float_rank(m_n)),
         matrix_shape=(m_n.rows, m_n.cols),

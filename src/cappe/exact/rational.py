@@ -33,8 +33,9 @@ def to_rational(value: object) -> sp.Rational:
     return out
 
 
-def rational_values(model: SymbolicModel, values: Mapping[str, float] | None,
-                    position: Mapping[str, float] | None) -> dict[sp.Symbol, sp.Rational]:
+def rational_values(
+    model: SymbolicModel, values: Mapping[str, float] | None, position: Mapping[str, float] | None
+) -> dict[sp.Symbol, sp.Rational]:
     """Substitution map with every parameter and axis coordinate as an exact rational."""
     params = model.structure.resolve_parameters(values)
     pos = model.structure.resolve_position(position)
@@ -63,9 +64,15 @@ class ExactStateSpace:
     output_names: tuple[str, ...]
 
 
-def exact_state_space(model: SymbolicModel, values: Mapping[str, float] | None = None,
-                      position: Mapping[str, float] | None = None, inputs: Sequence[str] | None = None,
-                      outputs: Sequence[str] | None = None, *, symbolic: bool = False) -> ExactStateSpace:
+def exact_state_space(
+    model: SymbolicModel,
+    values: Mapping[str, float] | None = None,
+    position: Mapping[str, float] | None = None,
+    inputs: Sequence[str] | None = None,
+    outputs: Sequence[str] | None = None,
+    *,
+    symbolic: bool = False,
+) -> ExactStateSpace:
     """Exact state-space matrices; with ``symbolic=True`` parameters stay symbols (small models only)."""
     warn_hysteretic(model)
     ins = list(inputs) if inputs is not None else [i.name for i in model.structure.inputs]

@@ -22,8 +22,12 @@ __all__ = ["S", "exact_transfer_function", "symbolic_transfer_function"]
 S = sp.Symbol("s")
 
 
-def _polynomials(model: SymbolicModel, input: str, output: str,  # noqa: A002
-                 subs: Mapping[sp.Symbol, sp.Expr]) -> tuple[sp.Poly, sp.Poly]:
+def _polynomials(
+    model: SymbolicModel,
+    input: str,
+    output: str,  # noqa: A002
+    subs: Mapping[sp.Symbol, sp.Expr],
+) -> tuple[sp.Poly, sp.Poly]:
     warn_hysteretic(model)
     n = model.n_dof
     z = (model.M * S**2 + (model.C + model.G) * S + model.K).xreplace(subs)
@@ -66,9 +70,13 @@ def _finish(num: sp.Poly, den: sp.Poly, input: str, output: str, kind: str) -> T
     return TransferFunctionModel(num_c, den_c, input, output, kind, tuple(cancelled))
 
 
-def exact_transfer_function(model: SymbolicModel, input: str, output: str,  # noqa: A002
-                            values: Mapping[str, float] | None = None,
-                            position: Mapping[str, float] | None = None) -> TransferFunctionModel:
+def exact_transfer_function(
+    model: SymbolicModel,
+    input: str,
+    output: str,  # noqa: A002
+    values: Mapping[str, float] | None = None,
+    position: Mapping[str, float] | None = None,
+) -> TransferFunctionModel:
     """Transfer function with exact rational coefficients (parameters read as exact decimals).
 
     Examples
@@ -82,9 +90,13 @@ def exact_transfer_function(model: SymbolicModel, input: str, output: str,  # no
     return _finish(num, den, input, output, "exact")
 
 
-def symbolic_transfer_function(model: SymbolicModel, input: str, output: str,  # noqa: A002
-                               values: Mapping[str, float] | None = None,
-                               position: Mapping[str, float] | None = None) -> TransferFunctionModel:
+def symbolic_transfer_function(
+    model: SymbolicModel,
+    input: str,
+    output: str,  # noqa: A002
+    values: Mapping[str, float] | None = None,
+    position: Mapping[str, float] | None = None,
+) -> TransferFunctionModel:
     """Transfer function with coefficients as expressions in the parameters (monic denominator).
 
     ``values`` may fix some parameters (exact rationals); ``position`` fixes axis coordinates (default: the

@@ -26,7 +26,7 @@ def read_parameters(path: str | Path) -> dict[str, float]:
         msg = f"parameter file {p} is not valid JSON: {exc.msg} at line {exc.lineno}, column {exc.colno}"
         raise DataError(msg) from exc
     if not isinstance(data, dict):
-        msg = f"parameter file {p} must hold a JSON object {{\"name\": value}}; got {type(data).__name__}"
+        msg = f'parameter file {p} must hold a JSON object {{"name": value}}; got {type(data).__name__}'
         raise DataError(msg)
     out: dict[str, float] = {}
     for name, value in data.items():

@@ -9,7 +9,7 @@ from __future__ import annotations
 import keyword
 import re
 from collections.abc import Iterable, Mapping
-from functools import lru_cache
+from functools import cache
 
 import sympy as sp
 from sympy.parsing.sympy_parser import (
@@ -47,7 +47,7 @@ FUNCTIONS: dict[str, object] = {
 _TRANSFORMS = (auto_number, factorial_notation, rationalize)
 
 
-@lru_cache(maxsize=None)
+@cache
 def symbol(name: str) -> sp.Symbol:
     """The sympy symbol cappe uses for a parameter or axis name (real-valued)."""
     return sp.Symbol(name, real=True)
@@ -121,11 +121,13 @@ def _parse(text: str, allowed: frozenset[str], where: str) -> sp.Expr:
             )
             raise ModelError(msg)
     try:
-        expr = parse_expr(text, local_dict=local, global_dict={"Integer": sp.Integer,
-                                                              "Float": sp.Float,
-                                                              "Rational": sp.Rational,
-                                                              "Symbol": sp.Symbol},
-                          transformations=_TRANSFORMS, evaluate=True)
+        expr = parse_expr(
+            text,
+            local_dict=local,
+            global_dict={"Integer": sp.Integer, "Float": sp.Float, "Rational": sp.Rational, "Symbol": sp.Symbol},
+            transformations=_TRANSFORMS,
+            evaluate=True,
+        )
     except (SyntaxError, TypeError, ValueError, AttributeError, NameError, ZeroDivisionError) as exc:
         msg = f"cannot parse expression {text!r}: {exc} ({where})"
         raise ModelError(msg) from exc

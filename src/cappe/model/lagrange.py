@@ -103,15 +103,9 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
             out += expr.diff(qi) * qdi
         return out
 
-    at_rest = {s: sp.Integer(0) for s in q}
-    at_rest_qd = {s: sp.Integer(0) for s in qd}
-
-    kinetic = sp.Integer(0)
-    for body in structure.bodies:
-        kinetic += _kinetic_energy(body, poses[body.name], dt)
-
-    potential = sp.Integer(0)
-    dissipation = sp.Integer(0)
+    kinetic = [_kinetic_energy(body, poses[body.name], dt) for body in structure.bodies]
+    potential: list[sp.Expr] = []
+    dissipation: list[sp.Expr] = []
     for element in structure.elements:
         for d in element.directions:
             stiffness = element.stiffness.get(d, sp.Integer(0))
@@ -119,33 +113,54 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
             if stiffness == 0 and damping == 0:
                 continue
             elongation = _elongation(element, d, poses, nominal)
-            potential += stiffness * elongation**2 / 2
+            potential.append(stiffness * elongation**2 / 2)
             rate = dt(sp.Matrix([elongation]))[0, 0]
-            dissipation += damping * rate**2 / 2
+            dissipation.append(damping * rate**2 / 2)
 
-    n = len(q)
-    mass = sp.zeros(n, n)
-    stiffness_matrix = sp.zeros(n, n)
-    damping_matrix = sp.zeros(n, n)
-    coupling = sp.zeros(n, n)
-    # T and D are quadratic in qd, so q can be set to 0 before differentiating with respect to qd.
-    kinetic_rest = kinetic.xreplace(at_rest)
-    dissipation_rest = dissipation.xreplace(at_rest)
-    grad_v = [potential.diff(qj) for qj in q]
-    grad_t = [kinetic.diff(qj).xreplace(at_rest) for qj in q]
-    for i in range(n):
-        for j in range(n):
-            mass[i, j] = kinetic_rest.diff(qd[i], qd[j])
-            damping_matrix[i, j] = dissipation_rest.diff(qd[i], qd[j])
-            stiffness_matrix[i, j] = grad_v[j].diff(q[i]).xreplace(at_rest)
-            coupling[i, j] = grad_t[j].diff(qd[i]).xreplace(at_rest_qd)
+    q_rest = {s: sp.Integer(0) for s in q}
+    qd_rest = {s: sp.Integer(0) for s in qd}
+    # T and D are quadratic in qd, so setting q = 0 before differentiating with respect to qd is exact.
+    kinetic_rest = [t.xreplace(q_rest) for t in kinetic]
+    dissipation_rest = [d.xreplace(q_rest) for d in dissipation]
+    coupling = _second_derivatives(kinetic, q, qd, between=q_rest, after=qd_rest)
     result = {
-        "M": mass,
-        "C": damping_matrix,
-        "K": stiffness_matrix,
+        "M": _second_derivatives(kinetic_rest, qd, qd),
+        "C": _second_derivatives(dissipation_rest, qd, qd),
+        "K": _second_derivatives(potential, q, q, after=q_rest),
         "G": coupling - coupling.T,
     }
     return {name: matrix.applyfunc(sp.expand) for name, matrix in result.items()}
+
+
+def _second_derivatives(
+    terms: Sequence[sp.Expr],
+    first: Sequence[sp.Symbol],
+    second: Sequence[sp.Symbol],
+    *,
+    between: Mapping[sp.Symbol, sp.Expr] | None = None,
+    after: Mapping[sp.Symbol, sp.Expr] | None = None,
+) -> sp.Matrix:
+    """Matrix ``A[i, j] = sum over terms of d/d second[i] (d term / d first[j])``.
+
+    ``between`` is substituted after the first derivative and ``after`` after the second (both are
+    evaluation points, e.g. q = 0). Each term is differentiated only with respect to the symbols it
+    contains, which keeps the work proportional to the size of each body's or element's energy.
+    """
+    out = sp.zeros(len(second), len(first))
+    index_first = {s: j for j, s in enumerate(first)}
+    index_second = {s: i for i, s in enumerate(second)}
+    for term in terms:
+        present = term.free_symbols
+        for s_first in present & index_first.keys():
+            gradient = term.diff(s_first)
+            if between:
+                gradient = gradient.xreplace(dict(between))
+            for s_second in gradient.free_symbols & index_second.keys():
+                value = gradient.diff(s_second)
+                if after:
+                    value = value.xreplace(dict(after))
+                out[index_second[s_second], index_first[s_first]] += value
+    return out
 
 
 def _pose(body: Body, full: Sequence[sp.Expr]) -> _Pose:

@@ -16,8 +16,19 @@ __all__ = ["FORMAT", "load_model", "structure_from_mapping"]
 FORMAT = "cappe.model/1"
 BUILTIN_PREFIX = "builtin:"
 
-_TOP = {"format", "name", "description", "source", "parameters", "axes", "bodies", "elements", "inputs",
-        "outputs", "sensors"}
+_TOP = {
+    "format",
+    "name",
+    "description",
+    "source",
+    "parameters",
+    "axes",
+    "bodies",
+    "elements",
+    "inputs",
+    "outputs",
+    "sensors",
+}
 _KEYS = {
     "parameters": ({"name", "value"}, {"unit", "kind", "bounds", "unknown", "disturbable", "description"}),
     "axes": ({"name"}, {"positions", "unit", "description"}),
@@ -49,7 +60,7 @@ def load_model(source: str | Path) -> Structure:
     if text_source.startswith(BUILTIN_PREFIX):
         from cappe.library import builtin_path
 
-        path = builtin_path(text_source[len(BUILTIN_PREFIX):])
+        path = builtin_path(text_source[len(BUILTIN_PREFIX) :])
         label = text_source
     else:
         path = Path(source)

@@ -85,8 +85,9 @@ class NumericModel:
             if plan.residual is not None
         }
         self.is_affine = not self._residual_funcs
-        self._io = sp.lambdify(all_symbols, [self.symbolic.input_matrix(), self.symbolic.output_matrix()],
-                               modules="numpy", cse=True)
+        self._io = sp.lambdify(
+            all_symbols, [self.symbolic.input_matrix(), self.symbolic.output_matrix()], modules="numpy", cse=True
+        )
         self.input_names = tuple(i.name for i in self.structure.inputs)
         self.output_names = tuple(o.name for o in self.structure.outputs)
         self.output_quantities = tuple(o.quantity for o in self.structure.outputs)
@@ -117,8 +118,10 @@ class NumericModel:
             return np.array([resolved[n] for n in self.parameter_names], dtype=float)
         arr = np.asarray(params, dtype=float)
         if arr.shape[-1:] != (len(self.parameter_names),) or arr.ndim > 2:
-            msg = (f"parameter array must have shape (n_params,) or (B, n_params) with n_params = "
-                   f"{len(self.parameter_names)}; got {arr.shape}")
+            msg = (
+                f"parameter array must have shape (n_params,) or (B, n_params) with n_params = "
+                f"{len(self.parameter_names)}; got {arr.shape}"
+            )
             raise ModelError(msg)
         if not np.all(np.isfinite(arr)):
             msg = "parameter array contains NaN or Inf"
@@ -136,14 +139,23 @@ class NumericModel:
             cached = {}
             for name, func in self._pattern_funcs.items():
                 mats = func(*pos)
-                cached[name] = (np.array([np.broadcast_to(np.asarray(m, dtype=float), (n, n)) for m in mats])
-                                .reshape(len(mats), n * n) if mats else np.zeros((0, n * n)))
+                cached[name] = (
+                    np.array([np.broadcast_to(np.asarray(m, dtype=float), (n, n)) for m in mats]).reshape(
+                        len(mats), n * n
+                    )
+                    if mats
+                    else np.zeros((0, n * n))
+                )
             self._pattern_cache[pos] = cached
         return cached
 
     # -- evaluation -------------------------------------------------------------------------------
-    def matrices(self, params: ParamsLike = None, position: Mapping[str, float] | None = None,
-                 names: Sequence[str] = MATRIX_NAMES) -> dict[str, Array]:
+    def matrices(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        names: Sequence[str] = MATRIX_NAMES,
+    ) -> dict[str, Array]:
         """M, C, K, G, H at a parameter vector (n, n) or a batch (B, n, n), at one axis position."""
         p = self.vector(params)
         batch = p.ndim == 2
@@ -167,8 +179,9 @@ class NumericModel:
             out[name] = mats if batch else mats[0]
         return out
 
-    def io_matrices(self, params: ParamsLike = None,
-                    position: Mapping[str, float] | None = None) -> tuple[Array, Array]:
+    def io_matrices(
+        self, params: ParamsLike = None, position: Mapping[str, float] | None = None
+    ) -> tuple[Array, Array]:
         """Input matrix (n_dof, n_inputs) and displacement-level output matrix (n_outputs, n_dof)."""
         p = self.vector(params)
         if p.ndim != 1:
@@ -192,15 +205,28 @@ class NumericModel:
         b_mat, s_mat = self.io_matrices(p, position)
         resolved = dict(zip(self.parameter_names, p.tolist(), strict=True))
         return MechanicalSystem(
-            M=mats["M"], C=mats["C"], K=mats["K"], G=mats["G"], H=mats["H"],
-            B=b_mat, S=s_mat, dofs=self.dofs, input_names=self.input_names,
-            output_names=self.output_names, output_quantities=self.output_quantities,
-            name=self.structure.name, parameters=resolved,
+            M=mats["M"],
+            C=mats["C"],
+            K=mats["K"],
+            G=mats["G"],
+            H=mats["H"],
+            B=b_mat,
+            S=s_mat,
+            dofs=self.dofs,
+            input_names=self.input_names,
+            output_names=self.output_names,
+            output_quantities=self.output_quantities,
+            name=self.structure.name,
+            parameters=resolved,
             position=dict(zip(self.axis_names, self.position_vector(position), strict=True)),
         )
 
-    def sensor_matrix(self, params: ParamsLike = None, position: Mapping[str, float] | None = None,
-                      sensors: Sequence[str] | None = None) -> tuple[list[str], Array]:
+    def sensor_matrix(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        sensors: Sequence[str] | None = None,
+    ) -> tuple[list[str], Array]:
         """Rows mapping q to x, y, z displacements of sensor nodes: labels ``node:dir`` and (3 n_s, n_dof)."""
         names = list(sensors) if sensors is not None else [s.name for s in self.structure.sensors]
         p = self.vector(params)

@@ -368,9 +368,11 @@ class StructureBuilder:
         Returns None if the expression cannot be evaluated to a real number.
         """
         subs = {symbol(p.name): sp.Float(p.value) for p in self._parameters}
-        positions = [{}] if not self._axes else [
-            {symbol(a.name): sp.Float(v)} for a in self._axes for v in (a.positions or (0.0,))
-        ]
+        positions = (
+            [{}]
+            if not self._axes
+            else [{symbol(a.name): sp.Float(v)} for a in self._axes for v in (a.positions or (0.0,))]
+        )
         values = []
         for pos in positions:
             try:
@@ -392,9 +394,7 @@ class StructureBuilder:
             return GROUND
         if name not in known:
             extra = " or 'ground'" if allow_ground else ""
-            msg = (
-                f"unknown body {name!r} ({where}); known bodies: {', '.join(known) or 'none'}{extra}"
-            )
+            msg = f"unknown body {name!r} ({where}); known bodies: {', '.join(known) or 'none'}{extra}"
             raise ModelError(msg)
         return str(name)
 
@@ -439,9 +439,7 @@ class StructureBuilder:
                 msg = f"parameter {name!r} bounds must satisfy lo < hi; got [{lo!r}, {hi!r}] ({where})"
                 raise ModelError(msg)
             if not lo <= number <= hi:
-                msg = (
-                    f"parameter {name!r} value {number!r} lies outside its bounds [{lo!r}, {hi!r}] ({where})"
-                )
+                msg = f"parameter {name!r} value {number!r} lies outside its bounds [{lo!r}, {hi!r}] ({where})"
                 raise ModelError(msg)
             lohi = (lo, hi)
         if unknown and lohi is None:
@@ -451,8 +449,15 @@ class StructureBuilder:
             Parameter(name, number, str(unit), kind, lohi, bool(unknown), bool(disturbable), str(description))
         )
 
-    def axis(self, name: str, positions: Sequence[float] = (), *, unit: str = "m", description: str = "",
-             where: str | None = None) -> None:
+    def axis(
+        self,
+        name: str,
+        positions: Sequence[float] = (),
+        *,
+        unit: str = "m",
+        description: str = "",
+        where: str | None = None,
+    ) -> None:
         """Declare a machine axis and the positions at which the model is studied."""
         where = self._here(where, "axes", len(self._axes))
         self._claim("axes", name, where)
@@ -539,8 +544,10 @@ class StructureBuilder:
                 [get["xy"], get["yy"], get["yz"]],
                 [get["xz"], get["yz"], get["zz"]],
             ]
-        elif isinstance(inertia, (list, tuple)) and len(inertia) == 3 and all(
-            isinstance(r, (list, tuple)) and len(r) == 3 for r in inertia
+        elif (
+            isinstance(inertia, (list, tuple))
+            and len(inertia) == 3
+            and all(isinstance(r, (list, tuple)) and len(r) == 3 for r in inertia)
         ):
             rows = [[self._expr(v, f"{here}[{i}][{j}]") for j, v in enumerate(r)] for i, r in enumerate(inertia)]
         else:
@@ -558,9 +565,9 @@ class StructureBuilder:
         import numpy as np
 
         subs = {symbol(p.name): p.value for p in self._parameters}
-        positions = [{}] if not self._axes else [
-            {symbol(a.name): v} for a in self._axes for v in (a.positions or (0.0,))
-        ]
+        positions = (
+            [{}] if not self._axes else [{symbol(a.name): v} for a in self._axes for v in (a.positions or (0.0,))]
+        )
         for pos in positions:
             try:
                 values = np.array(tensor.xreplace({**subs, **pos}).evalf(), dtype=float)
@@ -635,16 +642,26 @@ class StructureBuilder:
             point_b = self._vector(pts[1], f"{where}.points[1]")
         frame = self._frame(name, axes, f"{where}.axes")
         groups = {}
-        for label, table, kind in (("stiffness", stiffness, "stiffness"), ("damping", damping, "damping"),
-                                   ("loss", loss, "loss")):
+        for label, table, kind in (
+            ("stiffness", stiffness, "stiffness"),
+            ("damping", damping, "damping"),
+            ("loss", loss, "loss"),
+        ):
             groups[label] = self._directional(name, label, table or {}, f"{where}.{label}", kind)
         if not any(groups.values()):
             msg = f"element {name!r} has no stiffness, damping or loss in any direction ({where})"
             raise ModelError(msg)
         self._elements.append(
             StiffnessDampingElement(
-                name=name, body_a=a, body_b=b, point_a=point_a, point_b=point_b, axes=frame,
-                stiffness=groups["stiffness"], damping=groups["damping"], loss=groups["loss"],
+                name=name,
+                body_a=a,
+                body_b=b,
+                point_a=point_a,
+                point_b=point_b,
+                axes=frame,
+                stiffness=groups["stiffness"],
+                damping=groups["damping"],
+                loss=groups["loss"],
                 description=str(description),
             )
         )
@@ -671,8 +688,9 @@ class StructureBuilder:
         ez = ex.cross(ey)
         return sp.ImmutableMatrix(sp.Matrix.hstack(ex, ey, sp.simplify(ez)))
 
-    def _directional(self, name: str, label: str, table: Mapping[str, object], where: str,
-                     kind: str) -> Mapping[str, sp.Expr]:
+    def _directional(
+        self, name: str, label: str, table: Mapping[str, object], where: str, kind: str
+    ) -> Mapping[str, sp.Expr]:
         if not isinstance(table, Mapping):
             msg = f"element {name!r} {label} must map directions to values; got {table!r} ({where})"
             raise ModelError(msg)
@@ -688,16 +706,29 @@ class StructureBuilder:
             nominal = self._nominal_value(expr)
             if nominal is not None:
                 if kind == "stiffness" and nominal < 0:
-                    msg = f"element {name!r} stiffness {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                    msg = (
+                        f"element {name!r} stiffness {direction!r} must be >= 0; "
+                        f"got {nominal:.6g} ({where}.{direction})"
+                    )
                     raise ModelError(msg)
                 if kind != "stiffness" and nominal < 0:
-                    msg = f"element {name!r} {label} {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                    msg = (
+                        f"element {name!r} {label} {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                    )
                     raise ModelError(msg)
             out[direction] = expr
         return MappingProxyType({d: out[d] for d in DIRECTIONS if d in out})
 
-    def input(self, name: str, *, body: str, point: object = (0, 0, 0), direction: object = "x",
-              kind: str = "force", where: str | None = None) -> None:
+    def input(
+        self,
+        name: str,
+        *,
+        body: str,
+        point: object = (0, 0, 0),
+        direction: object = "x",
+        kind: str = "force",
+        where: str | None = None,
+    ) -> None:
         """Declare an input: a force (N) or moment (N m) on a body."""
         where = self._here(where, "inputs", len(self._inputs))
         self._claim("signals", name, where)
@@ -706,29 +737,53 @@ class StructureBuilder:
             raise ModelError(msg)
         body_name = self._require_body(body, f"{where}.body", allow_ground=False)
         self._inputs.append(
-            Input(name=name, kind=kind, body=body_name, point=self._vector(point, f"{where}.point"),
-                  direction=self._vector(direction, f"{where}.direction", unit=True))
+            Input(
+                name=name,
+                kind=kind,
+                body=body_name,
+                point=self._vector(point, f"{where}.point"),
+                direction=self._vector(direction, f"{where}.direction", unit=True),
+            )
         )
 
-    def output(self, name: str, *, quantity: str = "displacement", body: str | None = None,
-               point: object = (0, 0, 0), direction: object = "x", rotation: bool = False,
-               sensor: str | None = None, element: str | None = None, where: str | None = None) -> None:
+    def output(
+        self,
+        name: str,
+        *,
+        quantity: str = "displacement",
+        body: str | None = None,
+        point: object = (0, 0, 0),
+        direction: object = "x",
+        rotation: bool = False,
+        sensor: str | None = None,
+        element: str | None = None,
+        where: str | None = None,
+    ) -> None:
         """Declare an output: motion of a body point (or sensor) along a direction, or an elongation."""
         where = self._here(where, "outputs", len(self._outputs))
         self._claim("signals", name, where)
         if quantity not in QUANTITIES:
-            msg = f"output {name!r} quantity must be one of {', '.join(QUANTITIES)}; got {quantity!r} ({where}.quantity)"
+            msg = (
+                f"output {name!r} quantity must be one of {', '.join(QUANTITIES)}; got {quantity!r} ({where}.quantity)"
+            )
             raise ModelError(msg)
         if quantity == "elongation":
             names = [e.name for e in self._elements]
             if element not in names:
-                msg = f"output {name!r} refers to unknown element {element!r} ({where}.element); known: {', '.join(names) or 'none'}"
+                msg = (
+                    f"output {name!r} refers to unknown element {element!r} ({where}.element); "
+                    f"known: {', '.join(names) or 'none'}"
+                )
                 raise ModelError(msg)
             if direction not in DIRECTIONS:
-                msg = f"output {name!r} elongation direction must be one of {', '.join(DIRECTIONS)}; got {direction!r} ({where}.direction)"
+                msg = (
+                    f"output {name!r} elongation direction must be one of {', '.join(DIRECTIONS)}; "
+                    f"got {direction!r} ({where}.direction)"
+                )
                 raise ModelError(msg)
-            self._outputs.append(Output(name=name, quantity=quantity, element=str(element),
-                                        element_direction=str(direction)))
+            self._outputs.append(
+                Output(name=name, quantity=quantity, element=str(element), element_direction=str(direction))
+            )
             return
         if sensor is not None:
             found = [s for s in self._sensors if s.name == sensor]
@@ -739,9 +794,16 @@ class StructureBuilder:
         else:
             body_name = self._require_body(body, f"{where}.body", allow_ground=False)
             pt = self._vector(point, f"{where}.point")
-        self._outputs.append(Output(name=name, quantity=quantity, body=body_name, point=pt,
-                                    direction=self._vector(direction, f"{where}.direction", unit=True),
-                                    rotation=bool(rotation)))
+        self._outputs.append(
+            Output(
+                name=name,
+                quantity=quantity,
+                body=body_name,
+                point=pt,
+                direction=self._vector(direction, f"{where}.direction", unit=True),
+                rotation=bool(rotation),
+            )
+        )
 
     def sensor(self, name: str, *, body: str, point: object = (0, 0, 0), where: str | None = None) -> None:
         """Declare a named sensor node on a body."""
@@ -786,4 +848,3 @@ def _finite(value: object, what: str, where: str) -> float:
         msg = f"{what} must be finite; got {value!r} ({where})"
         raise ModelError(msg)
     return number
-

@@ -105,8 +105,9 @@ class SymbolicModel:
             rows_a = self.rotation_rows(e.body_a)
         return _combine([(axis[a], rows_b[a]) for a in range(3)] + [(-axis[a], rows_a[a]) for a in range(3)])
 
-    def direction_row(self, body: str, point: Sequence[sp.Expr], direction: Sequence[sp.Expr],
-                      rotation: bool = False) -> SparseRow:
+    def direction_row(
+        self, body: str, point: Sequence[sp.Expr], direction: Sequence[sp.Expr], rotation: bool = False
+    ) -> SparseRow:
         """Row mapping q to the motion of a body point along a unit direction (or rotation about it)."""
         rows = self.rotation_rows(body) if rotation else self.point_rows(body, point)
         return _combine([(direction[a], rows[a]) for a in range(3)])
@@ -221,8 +222,11 @@ class SymbolicModel:
     def input_matrix(self, inputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
         names = list(inputs) if inputs is not None else [i.name for i in self.structure.inputs]
         cols = [_dense_row(self.input_column(n), self.n_dof) for n in names]
-        return sp.ImmutableMatrix(sp.Matrix.hstack(*[c.T for c in cols])) if cols else sp.ImmutableMatrix(
-            sp.zeros(self.n_dof, 0))
+        return (
+            sp.ImmutableMatrix(sp.Matrix.hstack(*[c.T for c in cols]))
+            if cols
+            else sp.ImmutableMatrix(sp.zeros(self.n_dof, 0))
+        )
 
     def output_matrix(self, outputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
         """Displacement-level output rows (the quantity of each output says how to differentiate)."""
@@ -246,8 +250,10 @@ class SymbolicModel:
         """Raise ModelError if an input or output does not touch any active DOF."""
         for inp in self.structure.inputs:
             if not self.input_column(inp.name):
-                msg = (f"input {inp.name!r} acts only on inactive DOFs of body {inp.body!r} "
-                       f"(active: {', '.join(self.structure.body(inp.body).dofs)})")
+                msg = (
+                    f"input {inp.name!r} acts only on inactive DOFs of body {inp.body!r} "
+                    f"(active: {', '.join(self.structure.body(inp.body).dofs)})"
+                )
                 raise ModelError(msg)
         for out in self.structure.outputs:
             if not self.output_row(out.name)[1]:

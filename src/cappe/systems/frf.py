@@ -40,11 +40,13 @@ class FRFData:
         for o, out in enumerate(self.output_names):
             for i, inp in enumerate(self.input_names):
                 quantity = self.output_quantities[o] if self.output_quantities else "displacement"
-                pairs.append({
-                    "input": inp,
-                    "output": out,
-                    "unit": _UNITS.get(quantity, ""),
-                    "re": self.H[o, i].real.tolist(),
-                    "im": self.H[o, i].imag.tolist(),
-                })
+                pairs.append(
+                    {
+                        "input": inp,
+                        "output": out,
+                        "unit": _UNITS.get(quantity, ""),
+                        "re": self.H[o, i].real.tolist(),
+                        "im": self.H[o, i].imag.tolist(),
+                    }
+                )
         return {"frequency": self.freq.tolist(), "frf": pairs}

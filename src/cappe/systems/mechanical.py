@@ -81,7 +81,10 @@ class MechanicalSystem:
         scale = max(float(np.abs(lam).max()), 1e-300)
         lam = np.where(np.abs(lam) < 1e-10 * scale, 0.0, lam)
         if lam.min() < 0:
-            msg = f"stiffness matrix of model '{self.name}' is not positive semi-definite (min eigenvalue {lam.min():.3g})"
+            msg = (
+                f"stiffness matrix of model '{self.name}' is not positive semi-definite "
+                f"(min eigenvalue {lam.min():.3g})"
+            )
             raise ModelError(msg)
         return lam, phi
 
@@ -142,8 +145,15 @@ class MechanicalSystem:
             k = int(np.argmax(np.abs(phi[:, r])))
             if abs(phi[k, r]) > 0:
                 phi[:, r] = phi[:, r] / phi[k, r]
-        return ModalSet(wn[order] / (2 * np.pi), zeta[order], phi, p[order], self.dofs, "exact",
-                        np.array(rigid_flags, dtype=bool)[order])
+        return ModalSet(
+            wn[order] / (2 * np.pi),
+            zeta[order],
+            phi,
+            p[order],
+            self.dofs,
+            "exact",
+            np.array(rigid_flags, dtype=bool)[order],
+        )
 
     @staticmethod
     def _overdamped_zeta(pole: complex, wn: float) -> float:
@@ -179,8 +189,9 @@ class MechanicalSystem:
         a[n:, n:] = -sla.cho_solve(fac, damp)
         return a
 
-    def state_space(self, inputs: Sequence[str] | str | None = None,
-                    outputs: Sequence[str] | str | None = None) -> StateSpaceModel:
+    def state_space(
+        self, inputs: Sequence[str] | str | None = None, outputs: Sequence[str] | str | None = None
+    ) -> StateSpaceModel:
         """Continuous state space with x = [q, q'] for the chosen inputs and outputs.
 
         Hysteretic damping enters as its equivalent viscous matrix (it has no exact time-domain form).
@@ -205,12 +216,17 @@ class MechanicalSystem:
                 c[row] = s @ a[n:, :]
                 d[row] = s @ minv_b
         states = tuple(self.dofs) + tuple(f"d({q})/dt" for q in self.dofs)
-        return StateSpaceModel(a, b, c, d, None, states, tuple(self.input_names[i] for i in ii),
-                               tuple(self.output_names[k] for k in oo))
+        return StateSpaceModel(
+            a, b, c, d, None, states, tuple(self.input_names[i] for i in ii), tuple(self.output_names[k] for k in oo)
+        )
 
     # -- frequency response -----------------------------------------------------------------------
-    def frf(self, freq: Sequence[float] | NDArray[np.floating[Any]], inputs: Sequence[str] | str | None = None,
-            outputs: Sequence[str] | str | None = None) -> FRFData:
+    def frf(
+        self,
+        freq: Sequence[float] | NDArray[np.floating[Any]],
+        inputs: Sequence[str] | str | None = None,
+        outputs: Sequence[str] | str | None = None,
+    ) -> FRFData:
         """Exact FRF ``H[out, in, freq]`` with complex stiffness K + 1j H (freq in Hz)."""
         f = np.atleast_1d(np.asarray(freq, dtype=float))
         if f.ndim != 1 or not np.all(np.isfinite(f)) or np.any(f < 0):
@@ -219,7 +235,11 @@ class MechanicalSystem:
         ii = self._indices(inputs, self.input_names, "input")
         oo = self._indices(outputs, self.output_names, "output")
         w = 2 * np.pi * f
-        z = (self.K + 1j * self.H)[None] + 1j * w[:, None, None] * (self.C + self.G)[None] - (w**2)[:, None, None] * self.M[None]
+        z = (
+            (self.K + 1j * self.H)[None]
+            + 1j * w[:, None, None] * (self.C + self.G)[None]
+            - (w**2)[:, None, None] * self.M[None]
+        )
         rhs = np.broadcast_to(self.B[:, ii].astype(complex), (f.size, self.n_dof, len(ii)))
         try:
             x = np.linalg.solve(z, rhs)
@@ -230,17 +250,25 @@ class MechanicalSystem:
                     x[k] = np.linalg.solve(z[k], rhs[k])
                 except np.linalg.LinAlgError:
                     x[k] = np.inf
-                    warnings.warn(f"dynamic stiffness singular at {f[k]:g} Hz (rigid-body mode or undamped "
-                                  f"resonance); FRF set to inf there", IllConditionedWarning, stacklevel=2)
+                    warnings.warn(
+                        f"dynamic stiffness singular at {f[k]:g} Hz (rigid-body mode or undamped "
+                        f"resonance); FRF set to inf there",
+                        IllConditionedWarning,
+                        stacklevel=2,
+                    )
         s = self.S[oo]
         h = np.einsum("oi,fij->ojf", s, x)
         orders = np.array([_DERIVATIVE[self.output_quantities[k]] for k in oo])
         h = h * ((1j * w)[None, None, :] ** orders[:, None, None])
-        return FRFData(f, h, tuple(self.input_names[i] for i in ii), tuple(self.output_names[k] for k in oo),
-                       tuple(self.output_quantities[k] for k in oo))
+        return FRFData(
+            f,
+            h,
+            tuple(self.input_names[i] for i in ii),
+            tuple(self.output_names[k] for k in oo),
+            tuple(self.output_quantities[k] for k in oo),
+        )
 
-    def dc_gain(self, inputs: Sequence[str] | str | None = None,
-                outputs: Sequence[str] | str | None = None) -> Array:
+    def dc_gain(self, inputs: Sequence[str] | str | None = None, outputs: Sequence[str] | str | None = None) -> Array:
         """Static gain (outputs x inputs); inf where a rigid-body mode makes the static response unbounded."""
         ii = self._indices(inputs, self.input_names, "input")
         oo = self._indices(outputs, self.output_names, "output")

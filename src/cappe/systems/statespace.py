@@ -55,8 +55,7 @@ class StateSpaceModel:
             raise ModelError(msg)
         scipy_method = "bilinear" if method == "tustin" else "zoh"
         ad, bd, cd, dd, _ = sig.cont2discrete((self.A, self.B, self.C, self.D), dt, method=scipy_method)
-        return StateSpaceModel(ad, bd, cd, dd, float(dt), self.state_names, self.input_names,
-                               self.output_names, method)
+        return StateSpaceModel(ad, bd, cd, dd, float(dt), self.state_names, self.input_names, self.output_names, method)
 
     def to_control(self) -> Any:
         """The equivalent python-control ``StateSpace``."""
@@ -66,20 +65,33 @@ class StateSpaceModel:
 
     def to_dict(self) -> dict[str, Any]:
         return {
-            "A": self.A.tolist(), "B": self.B.tolist(), "C": self.C.tolist(), "D": self.D.tolist(),
-            "dt": self.dt, "method": self.method or None,
-            "states": list(self.state_names), "inputs": list(self.input_names),
+            "A": self.A.tolist(),
+            "B": self.B.tolist(),
+            "C": self.C.tolist(),
+            "D": self.D.tolist(),
+            "dt": self.dt,
+            "method": self.method or None,
+            "states": list(self.state_names),
+            "inputs": list(self.input_names),
             "outputs": list(self.output_names),
         }
 
-    def simulate(self, u: NDArray[np.floating[Any]], t: NDArray[np.floating[Any]] | None = None,
-                 x0: NDArray[np.floating[Any]] | None = None) -> tuple[Array, Array]:
+    def simulate(
+        self,
+        u: NDArray[np.floating[Any]],
+        t: NDArray[np.floating[Any]] | None = None,
+        x0: NDArray[np.floating[Any]] | None = None,
+    ) -> tuple[Array, Array]:
         """Time response; see :func:`simulate`."""
         return simulate(self, u, t, x0)
 
 
-def simulate(model: StateSpaceModel, u: NDArray[np.floating[Any]], t: NDArray[np.floating[Any]] | None = None,
-             x0: NDArray[np.floating[Any]] | None = None) -> tuple[Array, Array]:
+def simulate(
+    model: StateSpaceModel,
+    u: NDArray[np.floating[Any]],
+    t: NDArray[np.floating[Any]] | None = None,
+    x0: NDArray[np.floating[Any]] | None = None,
+) -> tuple[Array, Array]:
     """Response ``y[k, out]`` and states ``x[k, state]`` to inputs ``u[k, in]``.
 
     For a continuous model ``t`` (uniform, s) is required and the input is held constant over each sample
@@ -129,4 +141,3 @@ def simulate(model: StateSpaceModel, u: NDArray[np.floating[Any]], t: NDArray[np
         state = state @ a_t + bu[k]
     y = x @ disc.C.T + uu @ disc.D.T
     return y, x
-

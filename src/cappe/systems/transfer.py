@@ -97,8 +97,11 @@ def invariant_zeros(a: NDArray[Any], b: NDArray[Any], c: NDArray[Any], d: NDArra
     return finite[np.abs(finite) < 1e12 * max(1.0, float(np.abs(np.linalg.eigvals(a)).max()))]
 
 
-def transfer_function(ss: StateSpaceModel, input: str | None = None,  # noqa: A002
-                      output: str | None = None) -> TransferFunctionModel:
+def transfer_function(
+    ss: StateSpaceModel,
+    input: str | None = None,  # noqa: A002
+    output: str | None = None,
+) -> TransferFunctionModel:
     """Float SISO transfer function of a continuous state-space model, from its poles, zeros and gain.
 
     Poles are eigenvalues of A, zeros the invariant zeros of the pencil, and the gain matches the
@@ -121,8 +124,9 @@ def transfer_function(ss: StateSpaceModel, input: str | None = None,  # noqa: A0
     # poles and zeros come in conjugate pairs, so the coefficients are real up to round-off
     num_r = np.real(num)
     den_r = np.real(den)
-    return TransferFunctionModel(tuple(float(x) for x in num_r), tuple(float(x) for x in den_r),
-                                 ss.input_names[i], ss.output_names[o], "float")
+    return TransferFunctionModel(
+        tuple(float(x) for x in num_r), tuple(float(x) for x in den_r), ss.input_names[i], ss.output_names[o], "float"
+    )
 
 
 def _pick(names: Sequence[str], name: str | None, what: str) -> int:

@@ -27,8 +27,13 @@ class ZeroPoleGainModel:
         def pairs(v: NDArray[np.complex128]) -> list[list[float]]:
             return [[float(x.real), float(x.imag)] for x in _sorted(v)]
 
-        return {"input": self.input, "output": self.output, "zeros": pairs(self.zeros),
-                "poles": pairs(self.poles), "gain": float(self.gain)}
+        return {
+            "input": self.input,
+            "output": self.output,
+            "zeros": pairs(self.zeros),
+            "poles": pairs(self.poles),
+            "gain": float(self.gain),
+        }
 
     def dc_gain(self) -> float:
         if np.any(np.abs(self.poles) == 0):
