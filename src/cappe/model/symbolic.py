@@ -69,7 +69,7 @@ class SymbolicModel:
             i += len(body.dofs)
 
     # -- kinematics -------------------------------------------------------------------------------
-    def _columns(self, body: str) -> dict[str, int]:
+    def _columns(self, body: str) -> dict[int, int]:
         """Map of DIRECTIONS index -> global DOF index for the active DOFs of ``body``."""
         if body == GROUND:
             return {}

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -12,7 +13,7 @@ from cappe.systems.zpk import ZeroPoleGainModel
 __all__ = ["bode_plot", "pole_zero_plot"]
 
 
-def _figure(rows: int) -> tuple[object, object]:
+def _figure(rows: int) -> tuple[Any, Any]:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -21,21 +22,22 @@ def _figure(rows: int) -> tuple[object, object]:
     return plt.subplots(rows, 1, figsize=(7, 3 + 2 * rows), sharex=rows > 1)
 
 
-def _save(fig: object, path: str | Path) -> Path:
+def _save(fig: Any, path: str | Path) -> Path:
     import matplotlib.pyplot as plt
 
     out = Path(path)
     tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
-    fig.tight_layout()  # type: ignore[attr-defined]
-    fig.savefig(tmp, dpi=120)  # type: ignore[attr-defined]
-    plt.close(fig)  # type: ignore[arg-type]
+    fig.tight_layout()
+    fig.savefig(tmp, dpi=120)
+    plt.close(fig)
     tmp.replace(out)
     return out
 
 
 def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
     """Bode magnitude (dB re 1 unit) and phase (deg) of every output/input pair, written to ``path``."""
-    fig, (ax_mag, ax_phase) = _figure(2)  # type: ignore[misc]
+    fig, axes = _figure(2)
+    ax_mag, ax_phase = axes
     for o, out in enumerate(frf.output_names):
         for i, inp in enumerate(frf.input_names):
             h = frf.H[o, i]
@@ -54,7 +56,7 @@ def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
 
 def pole_zero_plot(model: ZeroPoleGainModel, path: str | Path, title: str = "") -> Path:
     """Pole-zero map in the s-plane (rad/s), written to ``path``."""
-    fig, ax = _figure(1)  # type: ignore[misc]
+    fig, ax = _figure(1)
     ax.plot(model.poles.real, model.poles.imag, "x", markersize=9, label="poles")
     if model.zeros.size:
         ax.plot(model.zeros.real, model.zeros.imag, "o", mfc="none", markersize=8, label="zeros")

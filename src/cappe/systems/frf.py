@@ -33,7 +33,7 @@ class FRFData:
 
     def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
         """The FRF of one output/input pair."""
-        return self.H[self.output_names.index(output), self.input_names.index(input)]
+        return np.asarray(self.H[self.output_names.index(output), self.input_names.index(input)], dtype=complex)
 
     def to_dict(self) -> dict[str, Any]:
         pairs = []

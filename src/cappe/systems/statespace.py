@@ -40,7 +40,7 @@ class StateSpaceModel:
 
     def poles(self) -> NDArray[np.complex128]:
         """Eigenvalues of A (rad/s for continuous, z-plane for discrete)."""
-        return np.linalg.eigvals(self.A)
+        return np.asarray(np.linalg.eigvals(self.A), dtype=complex)
 
     def discretize(self, dt: float, method: str = "zoh") -> StateSpaceModel:
         """Discrete model by zero-order hold (``"zoh"``) or the bilinear transform (``"tustin"``)."""

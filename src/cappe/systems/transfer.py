@@ -44,11 +44,11 @@ class TransferFunctionModel:
         return (np.array([float(c) for c in self.numerator]), np.array([float(c) for c in self.denominator]))
 
     def poles(self) -> NDArray[np.complex128]:
-        return np.roots(self.float_coefficients()[1])
+        return np.asarray(np.roots(self.float_coefficients()[1]), dtype=complex)
 
     def zeros(self) -> NDArray[np.complex128]:
         num = np.trim_zeros(self.float_coefficients()[0], "f")
-        return np.roots(num) if num.size > 1 else np.zeros(0, complex)
+        return np.asarray(np.roots(num), dtype=complex) if num.size > 1 else np.zeros(0, complex)
 
     def evaluate(self, s: complex | NDArray[np.complexfloating[Any]]) -> Any:
         """Value at complex frequency s (rad/s)."""
@@ -94,7 +94,8 @@ def invariant_zeros(a: NDArray[Any], b: NDArray[Any], c: NDArray[Any], d: NDArra
     e[:n, :n] = np.eye(n)
     vals = sla.eigvals(big, e)
     finite = vals[np.isfinite(vals)]
-    return finite[np.abs(finite) < 1e12 * max(1.0, float(np.abs(np.linalg.eigvals(a)).max()))]
+    keep = np.abs(finite) < 1e12 * max(1.0, float(np.abs(np.linalg.eigvals(a)).max()))
+    return np.asarray(finite[keep], dtype=complex)
 
 
 def transfer_function(
