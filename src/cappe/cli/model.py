@@ -183,6 +183,16 @@ def modes(args: argparse.Namespace) -> int:
     result = ctx.system().modes(args.damping)
     data = result.to_dict()
     data["position"] = ctx.position
+    notes = []
+    if args.damping == "exact":
+        # how far the light-damping (first-order) estimate is from the exact complex modes
+        approx = ctx.system().modes("first-order")
+        if approx.n_modes == result.n_modes:
+            safe = np.where(result.frequency > 0, result.frequency, 1.0)
+            df = float(np.max(np.abs(approx.frequency - result.frequency) / safe, initial=0.0))
+            dz = float(np.max(np.abs(approx.damping - result.damping), initial=0.0))
+            data["first_order_difference"] = {"frequency_max_relative": df, "damping_max_absolute": dz}
+            notes.append(f"first-order vs exact: frequencies within {100 * df:.3g} %, damping ratios within {dz:.3g}")
     lines = [
         f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
         f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF",
@@ -191,6 +201,7 @@ def modes(args: argparse.Namespace) -> int:
         k = int(np.argmax(np.abs(result.shapes[:, r])))
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
         lines.append(f"{r + 1:>4} {result.frequency[r]:>15.3f} {100 * result.damping[r]:>12.4f}  {result.dofs[k]}{tag}")
+    lines.extend(notes)
     emit(args, data, "\n".join(lines))
     return 0
 

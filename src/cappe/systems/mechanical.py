@@ -269,18 +269,27 @@ class MechanicalSystem:
         )
 
     def dc_gain(self, inputs: Sequence[str] | str | None = None, outputs: Sequence[str] | str | None = None) -> Array:
-        """Static gain (outputs x inputs); inf where a rigid-body mode makes the static response unbounded."""
+        """Static gain (outputs x inputs).
+
+        Velocity and acceleration outputs have zero static gain. With rigid-body modes (singular K) the gain
+        is finite when the input does no work on the rigid-body motion; when it does, the gain is inf for an
+        output that sees the rigid-body motion and nan (undefined without inertia relief) for one that does not.
+        """
         ii = self._indices(inputs, self.input_names, "input")
         oo = self._indices(outputs, self.output_names, "output")
         out = np.zeros((len(oo), len(ii)))
         k = self.K + 1j * self.H
-        rank = np.linalg.matrix_rank(self.K)
+        lam, phi = self.undamped_modes()
+        rigid = phi[:, lam == 0]
+        x, *_ = np.linalg.lstsq(k, self.B[:, ii].astype(complex), rcond=None)
+        scale_b = np.abs(self.B[:, ii]).max(axis=0) + 1e-300
+        excites = (
+            np.abs(rigid.T @ self.B[:, ii]).max(axis=0) > 1e-9 * scale_b if rigid.size else np.zeros(len(ii), bool)
+        )
         for row, o in enumerate(oo):
-            order = _DERIVATIVE[self.output_quantities[o]]
-            if order > 0:
+            if _DERIVATIVE[self.output_quantities[o]] > 0:
                 continue
-            if rank < self.n_dof:
-                out[row] = np.inf
-                continue
-            out[row] = np.real(self.S[o] @ np.linalg.solve(k, self.B[:, ii]))
+            sees = bool(rigid.size) and np.abs(self.S[o] @ rigid).max() > 1e-9 * (np.abs(self.S[o]).max() + 1e-300)
+            values = np.real(self.S[o] @ x)
+            out[row] = np.where(excites, np.inf if sees else np.nan, values) if rigid.size else values
         return out
