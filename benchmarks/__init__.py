@@ -1,0 +1,1 @@
+"""Performance harness: ratios measured in one run, written to benchmarks/results/*.json."""

@@ -1,0 +1,13 @@
+"""Run the benchmarks: ``python -m benchmarks`` (``make bench``)."""
+
+from __future__ import annotations
+
+from benchmarks import bench_matrices
+
+
+def main() -> None:
+    bench_matrices.main()
+
+
+if __name__ == "__main__":
+    main()
