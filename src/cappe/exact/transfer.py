@@ -84,7 +84,7 @@ def exact_transfer_function(
     >>> from cappe.model import load_model, derive
     >>> tf = exact_transfer_function(derive(load_model("builtin:two-mass-rig")), "F1", "d2")
     >>> tf.numerator
-    (12000000/151511, 0)
+    (1200000000/15151,)
     """
     num, den = _polynomials(model, input, output, rational_values(model, values, position))
     return _finish(num, den, input, output, "exact")

@@ -50,8 +50,8 @@ class NumericModel:
     >>> from cappe.model import load_model
     >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
     >>> nm.matrices()["K"]
-    array([[ 1500000.,  -120000.],
-           [ -120000.,   360000.]])
+    array([[1500000., -120000.],
+           [-120000.,  360000.]])
     """
 
     def __init__(self, model: Structure | SymbolicModel) -> None:
