@@ -19,6 +19,7 @@ from cappe.exact import (
     exact_state_space,
     exact_transfer_function,
     float_rank,
+    invertibility_matrix,
     observability_rank,
     sain_massey,
     symbolic_transfer_function,
@@ -40,8 +41,7 @@ def plate_symbolic():
     return derive(load_model("builtin:dynamometer-plate"))
 
 
-m1, m2, k11, k12, k22, c11, c12, c22 = (symbol(n) for n in ("m1", "m2", "k11", "k12", "k22", "c11", "c12",
-                                                           "c22"))
+m1, m2, k11, k12, k22, c11, c12, c22 = (symbol(n) for n in ("m1", "m2", "k11", "k12", "k22", "c11", "c12", "c22"))
 
 # thesis eq. 5.9: common monic denominator s^4 + a3 s^3 + a2 s^2 + a1 s + a0 of G11 and G21
 THESIS_DEN = (
@@ -106,9 +106,15 @@ def test_symbolic_dc_gains_match_thesis_eq_5_12():
         np.testing.assert_allclose(system.dc_gain("F1", out)[0, 0], float(value), rtol=1e-13)
 
 
-@pytest.mark.parametrize(("values", "out"), [(None, "d1"), (None, "d2"),
-                                            ({"c12": 0.5, "m2": 1.2, "k22": 2.5e5}, "d1"),
-                                            ({"c12": 0.5, "m2": 1.2, "k22": 2.5e5}, "d2")])
+@pytest.mark.parametrize(
+    ("values", "out"),
+    [
+        (None, "d1"),
+        (None, "d2"),
+        ({"c12": 0.5, "m2": 1.2, "k22": 2.5e5}, "d1"),
+        ({"c12": 0.5, "m2": 1.2, "k22": 2.5e5}, "d2"),
+    ],
+)
 def test_exact_tf_equals_thesis_formulas_at_rational_values(values, out):
     structure = rig_symbolic().structure
     resolved = structure.resolve_parameters(values)
@@ -149,14 +155,34 @@ def test_dynamometer_sain_massey_exact_vs_float():
     # double precision: the entries span ~1e-3..1e14, the SVD rank collapses and says "not invertible"
     assert result.float_ranks != result.exact_ranks
     assert not result.invertible_float
-    # the Sain-Massey matrix really holds the Markov parameters: block (1, 0) = C B, the 6x6 M^-1 (rows
-    # x..rz and inputs at the centre of gravity: B = I)
-    from cappe.exact import invertibility_matrix
-
+    # the Sain-Massey matrix holds the Markov parameters D, C B, C A B: with displacement outputs of all six
+    # coordinates and loads at the reference point, D = C B = 0 and C A B = M^-1 (hand-derived)
     mk = invertibility_matrix(ss, 2)
-    assert mk[6:12, 0:6] == ss.C * ss.B
-    assert mk[12:18, 0:6] == ss.C * ss.A * ss.B
-    assert mk[0:6, 6:12] == sp.zeros(6, 6)
+    nominal = {symbol(k): to_rational(v) for k, v in plate_symbolic().structure.nominal.items()}
+    minv = plate_symbolic().M.xreplace(nominal).inv()
+    assert mk[0:6, 0:6] == sp.zeros(6, 6)
+    assert mk[6:12, 0:6] == sp.zeros(6, 6)
+    assert mk[12:18, 0:6] == minv
+    assert mk[12:18, 6:12] == sp.zeros(6, 6)  # block Toeplitz: (2, 1) = C B
+    assert mk[0:6, 6:12] == sp.zeros(6, 6)  # lower triangular
+
+
+def test_sain_massey_simple_cases():
+    # SISO G11 (relative degree 2, non-zero): invertible, the rank grows by exactly m = 1
+    siso = sain_massey(exact_state_space(rig_symbolic(), inputs=["F1"], outputs=["d1"]))
+    assert siso.invertible_exact
+    assert siso.exact_ranks[1] - siso.exact_ranks[0] == 1
+    # d1 = 0 u, C B = 0, C A B = 1/m1, ...: the first Markov parameters give the ranks by hand: M_4 is
+    # lower-triangular Toeplitz of (0, 0, 1/m1, x, y) so rank = 5 - 2 = 3, M_3 has rank 4 - 2 = 2
+    assert siso.exact_ranks == (2, 3)
+    # identically zero transfer function (force across the measured direction): never invertible
+    zero = sain_massey(exact_state_space(twin_oscillators(), inputs=["F"], outputs=["dp"]))
+    assert zero.exact_ranks == (0, 0)
+    assert not zero.invertible_exact
+    # more inputs than outputs: not left-invertible whatever the ranks
+    wide = sain_massey(exact_state_space(rig_symbolic(), inputs=["F1", "F2"], outputs=["d1"]))
+    assert not wide.invertible_exact
+    assert not wide.invertible_float
 
 
 def test_dynamometer_exact_tf_cancels_the_bounce_mode():
@@ -181,23 +207,41 @@ def test_dynamometer_exact_tf_cancels_the_bounce_mode():
     for root in bounce_roots:
         assert np.min(np.abs(ftf.poles() - root)) < 1e-6 * abs(root)
         assert np.min(np.abs(ftf.zeros() - root)) < 1e-6 * abs(root)
-    # the reduced exact TF is the same function as the float FRF (evaluated away from the bounce mode,
-    # where the float model has a near pole-zero pair): 1e-7 relative, float TF round-off
+    # the reduced exact TF is the same function as cappe's second-order FRF solve: exact coefficients
+    # rounded to float and evaluated by Horner (coefficients spanning ~45 decades) agree to ~1e-12 (observed)
     freq = np.array([50.0, 400.0, 1500.0, 2500.0, 3000.0, 6000.0])
     s = 2j * np.pi * freq
     num, den = tf.float_coefficients()
-    np.testing.assert_allclose(np.polyval(num, s) / np.polyval(den, s),
-                               system.frf(freq, "Fx", "x").H[0, 0], rtol=1e-7)
+    np.testing.assert_allclose(np.polyval(num, s) / np.polyval(den, s), system.frf(freq, "Fx", "x").H[0, 0], rtol=1e-7)
 
 
-def test_exact_state_space_equals_float_state_space():
-    sym = plate_symbolic()
+@pytest.mark.parametrize("name", ["plate", "rig"])
+def test_exact_state_space_equals_float_state_space(name):
+    # the rig has velocity and acceleration outputs (C rows from A, a non-zero D)
+    sym = plate_symbolic() if name == "plate" else rig_symbolic()
     ess = exact_state_space(sym)
     fss = NumericModel(sym).system().state_space()
+    assert ess.output_names == fss.output_names
+    assert ess.input_names == fss.input_names
     # exact rationals rounded once vs float assembly and Cholesky solves: 1e-12 relative of each matrix
     for exact, flt in ((ess.A, fss.A), (ess.B, fss.B), (ess.C, fss.C), (ess.D, fss.D)):
         arr = np.array(exact, dtype=float)
         np.testing.assert_allclose(flt, arr, rtol=1e-10, atol=1e-12 * max(np.abs(arr).max(), 1e-300))
+
+
+def test_symbolic_state_space_substitutes_to_exact():
+    sym = rig_symbolic()
+    symbolic = exact_state_space(sym, symbolic=True)
+    exact = exact_state_space(sym)
+    nominal = {symbol(k): to_rational(v) for k, v in sym.structure.nominal.items()}
+    for s_mat, e_mat in ((symbolic.A, exact.A), (symbolic.B, exact.B), (symbolic.C, exact.C), (symbolic.D, exact.D)):
+        assert (s_mat.xreplace(nominal) - e_mat).applyfunc(sp.simplify) == sp.zeros(*e_mat.shape)
+    # hand-written: acceleration a1 = (F1 - (k11 + k12) d1 + k12 d2 - (c11 + c12) v1 + c12 v2) / m1
+    a1 = symbolic.output_names.index("a1")
+    expected_row = sp.Matrix([[-(k11 + k12) / m1, k12 / m1, -(c11 + c12) / m1, c12 / m1]])
+    assert (symbolic.C[a1, :] - expected_row).applyfunc(sp.simplify) == sp.zeros(1, 4)
+    assert sp.simplify(symbolic.D[a1, symbolic.input_names.index("F1")] - 1 / m1) == 0
+    assert symbolic.D[a1, symbolic.input_names.index("F2")] == 0
 
 
 # ---------------------------------------------------------------------------------------------------
@@ -302,7 +346,9 @@ WIDE_RANGE = [
     # outer products u1 v1^T + u2 v2^T, entries 1e-24..1e24: rank 2 by construction
     pytest.param(
         sp.Matrix([E, 1, e, 1]) * sp.Matrix([[1, e, E, 1]]) + sp.Matrix([1, E, 1, e]) * sp.Matrix([[e, 1, 1, E]]),
-        2, id="two-outer-products"),
+        2,
+        id="two-outer-products",
+    ),
 ]
 
 

@@ -104,7 +104,7 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
         return out
 
     kinetic = [_kinetic_energy(body, poses[body.name], dt) for body in structure.bodies]
-    potential: list[sp.Expr] = []
+    springs: list[tuple[sp.Expr, sp.Expr]] = []  # V = sum 1/2 k l^2 as (k, l) pairs
     dissipation: list[sp.Expr] = []
     for element in structure.elements:
         for d in element.directions:
@@ -113,7 +113,7 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
             if stiffness == 0 and damping == 0:
                 continue
             elongation = _elongation(element, d, poses, nominal)
-            potential.append(stiffness * elongation**2 / 2)
+            springs.append((stiffness, elongation))
             rate = dt(sp.Matrix([elongation]))[0, 0]
             dissipation.append(damping * rate**2 / 2)
 
@@ -122,11 +122,13 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
     # T and D are quadratic in qd, so setting q = 0 before differentiating with respect to qd is exact.
     kinetic_rest = [t.xreplace(q_rest) for t in kinetic]
     dissipation_rest = [d.xreplace(q_rest) for d in dissipation]
-    coupling = _second_derivatives(kinetic, q, qd, between=q_rest, after=qd_rest)
+    # N_ij = d2T/(dqd_i dq_j) at rest. The partial derivatives commute, so differentiate in qd first and
+    # set qd = 0 before differentiating in q: that drops the (large) part of T quadratic in qd early.
+    coupling = _second_derivatives(kinetic, qd, q, between=qd_rest, after=q_rest).T
     result = {
         "M": _second_derivatives(kinetic_rest, qd, qd),
         "C": _second_derivatives(dissipation_rest, qd, qd),
-        "K": _second_derivatives(potential, q, q, after=q_rest),
+        "K": _squares_hessian(springs, q, q_rest),
         "G": coupling - coupling.T,
     }
     return {name: matrix.applyfunc(sp.expand) for name, matrix in result.items()}
@@ -160,6 +162,29 @@ def _second_derivatives(
                 if after:
                     value = value.xreplace(dict(after))
                 out[index_second[s_second], index_first[s_first]] += value
+    return out
+
+
+def _squares_hessian(
+    squares: Sequence[tuple[sp.Expr, sp.Expr]],
+    variables: Sequence[sp.Symbol],
+    rest: Mapping[sp.Symbol, sp.Expr],
+) -> sp.Matrix:
+    """Hessian at ``rest`` of ``V = sum 1/2 k l(q)^2`` over ``(k, l)`` pairs.
+
+    By the product rule, ``d2(1/2 k l^2)/dq_i dq_j = k (dl/dq_i dl/dq_j + l d2l/dq_i dq_j)``. The second
+    derivatives of ``l`` are only needed where ``l`` does not vanish at ``rest``; an elongation is zero in the
+    nominal configuration, so usually only the gradient is computed (n derivatives per term instead of n^2).
+    """
+    n = len(variables)
+    out = sp.zeros(n, n)
+    rest_map = dict(rest)
+    for k, length in squares:
+        gradient = sp.Matrix([length.diff(v).xreplace(rest_map) for v in variables])
+        out += k * gradient * gradient.T
+        value = length.xreplace(rest_map)
+        if value != 0:
+            out += k * value * sp.hessian(length, variables).xreplace(rest_map)
     return out
 
 

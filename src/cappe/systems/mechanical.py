@@ -113,51 +113,64 @@ class MechanicalSystem:
         lam, vec = np.linalg.eig(a)
         n = self.n_dof
         scale = max(float(np.abs(lam).max()), 1.0)
+        # a defective double zero eigenvalue (undamped rigid-body mode) splits by about sqrt(eps)*|A| in
+        # floating point, so "zero" is judged at 1e-7 relative, well above that and well below any real mode
+        lam = np.where(np.abs(lam) < 1e-7 * scale, 0.0, lam)
         tol = 1e-9 * scale
         oscill = np.where(lam.imag > tol)[0]
-        real_idx = np.where(np.abs(lam.imag) <= tol)[0]
-        poles = list(lam[oscill])
+        real_idx = [int(i) for i in np.where(np.abs(lam.imag) <= tol)[0]]
+        wn = [float(abs(lam[i])) for i in oscill]
+        zeta = [float(-lam[i].real / abs(lam[i])) for i in oscill]
+        poles = [complex(lam[i]) for i in oscill]
         shapes = [vec[:n, i] for i in oscill]
-        # real (overdamped or rigid-body) poles pair up into modes: omega^2 = l1 l2, 2 zeta omega = -(l1 + l2)
-        reals = sorted(real_idx, key=lambda i: abs(lam[i].real))
-        rigid_flags = [False] * len(poles)
-        for k in range(0, len(reals) - 1, 2):
-            i, j = reals[k], reals[k + 1]
-            l1, l2 = lam[i].real, lam[j].real
-            w = np.sqrt(max(l1 * l2, 0.0))
-            if w <= tol:
-                poles.append(0j)
-                rigid_flags.append(True)
-            else:
-                z = -(l1 + l2) / (2 * w)
-                poles.append(complex(-z * w, 0.0))
-                rigid_flags.append(False)
+        rigid = [False] * len(poles)
+        # real poles (overdamped or rigid-body modes) come in pairs belonging to one mode each: pair them by
+        # the similarity (MAC) of their displacement shapes; then omega^2 = l1 l2 and 2 zeta omega = -(l1 + l2)
+        for i, j in self._pair_real_poles(real_idx, vec[:n]):
+            l1, l2 = float(lam[i].real), float(lam[j].real) if j is not None else 0.0
+            w = float(np.sqrt(max(l1 * l2, 0.0))) if j is not None else abs(l1)
+            is_rigid = w <= tol
+            wn.append(0.0 if is_rigid else w)
+            zeta.append(0.0 if is_rigid else (-(l1 + l2) / (2 * w) if j is not None else 1.0))
+            poles.append(complex(max(l1, l2) if j is not None else l1, 0.0))
             shapes.append(vec[:n, i])
-        p = np.array(poles, dtype=complex)
-        wn = np.abs(p)
-        zeta = np.zeros_like(wn)
-        for r, flag in enumerate(rigid_flags):
-            if not flag and wn[r] > 0:
-                zeta[r] = -p[r].real / wn[r] if p[r].imag != 0 else self._overdamped_zeta(p[r], wn[r])
-        order = np.argsort(wn, kind="stable")
+            rigid.append(is_rigid)
+        wn_arr = np.array(wn)
+        order = np.argsort(wn_arr, kind="stable")
         phi = np.array(shapes, dtype=complex).T[:, order] if shapes else np.zeros((n, 0), complex)
         for r in range(phi.shape[1]):
             k = int(np.argmax(np.abs(phi[:, r])))
             if abs(phi[k, r]) > 0:
                 phi[:, r] = phi[:, r] / phi[k, r]
         return ModalSet(
-            wn[order] / (2 * np.pi),
-            zeta[order],
+            wn_arr[order] / (2 * np.pi),
+            np.array(zeta)[order],
             phi,
-            p[order],
+            np.array(poles, dtype=complex)[order],
             self.dofs,
             "exact",
-            np.array(rigid_flags, dtype=bool)[order],
+            np.array(rigid, dtype=bool)[order],
         )
 
     @staticmethod
-    def _overdamped_zeta(pole: complex, wn: float) -> float:
-        return float(-pole.real / wn)
+    def _pair_real_poles(indices: list[int], shapes: NDArray[Any]) -> list[tuple[int, int | None]]:
+        """Greedy pairing of real eigenvalues by the MAC of their displacement eigenvectors."""
+        left = list(indices)
+        pairs: list[tuple[int, int | None]] = []
+        while len(left) > 1:
+            best, best_mac = (left[0], left[1]), -1.0
+            for a_pos, i in enumerate(left):
+                for j in left[a_pos + 1 :]:
+                    u, v = shapes[:, i], shapes[:, j]
+                    den = float(np.real(np.vdot(u, u) * np.vdot(v, v)))
+                    mac = abs(np.vdot(u, v)) ** 2 / den if den > 0 else 0.0
+                    if mac > best_mac:
+                        best, best_mac = (i, j), mac
+            pairs.append(best)
+            left = [k for k in left if k not in best]
+        if left:
+            pairs.append((left[0], None))
+        return pairs
 
     # -- state space ------------------------------------------------------------------------------
     def equivalent_viscous_hysteretic(self) -> Array:
