@@ -33,6 +33,7 @@ from sympy.physics.mechanics import (
     inertia,
 )
 
+from cappe.exceptions import ModelError
 from cappe.model import Structure, StructureBuilder, SymbolicModel, load_model
 from cappe.model._expressions import symbol
 from cappe.model.lagrange import lagrange_matrices
@@ -86,7 +87,8 @@ def kane_linear(
     """
     t = dynamicsymbols._t
     u = dynamicsymbols(f"u0:{len(q)}")
-    method = KanesMethod(frame, q_ind=list(q), u_ind=u, kd_eqs=[qi.diff(t) - ui for qi, ui in zip(q, u, strict=True)])
+    kinematics = [qi.diff(t) - ui for qi, ui in zip(q, u, strict=True)]
+    method = KanesMethod(frame, q_ind=list(q), u_ind=u, kd_eqs=kinematics)
     method.kanes_equations(list(bodies), list(loads))
     qs = sp.symbols(f"qs0:{len(q)}", real=True)
     us = sp.symbols(f"us0:{len(q)}", real=True)
@@ -116,29 +118,29 @@ def spring_damper(point_b: Point, point_a: Point, origin: Point, frame: Referenc
     return [(point_b, -tension * direction), (point_a, tension * direction)]
 
 
-def rigid_body(name: str, frame: ReferenceFrame, origin: Point, coordinates: Mapping[str, sp.Function],
-               position: Sequence[sp.Expr], mass: sp.Expr, inertia_matrix: sp.Matrix,
-               com: Sequence[sp.Expr]) -> tuple[ReferenceFrame, Point, RigidBody]:
-    """A rigid body with body-fixed x-y-z angles and a translated origin (inactive coordinates 0)."""
+def in_frame(frame: ReferenceFrame, components: Sequence[sp.Expr]) -> object:
+    """The vector with ``components`` along ``frame``'s x, y, z."""
+    return components[0] * frame.x + components[1] * frame.y + components[2] * frame.z
+
+
+def moving_frame(name: str, frame: ReferenceFrame, origin: Point, coordinates: Mapping[str, sp.Function],
+                 position: Sequence[sp.Expr]) -> tuple[ReferenceFrame, Point]:
+    """Frame and origin of a body: body-fixed x-y-z angles, origin translated from ``position``.
+
+    ``coordinates`` maps the body's active DOFs (x y z rx ry rz) to dynamic symbols; the others stay 0.
+    """
     angles = [coordinates.get(d, ZERO) for d in ("rx", "ry", "rz")]
     body_frame = frame.orientnew(f"{name}_frame", "Body", angles, "XYZ")
-    shift = sum((coordinates.get(d, ZERO) * axis for d, axis in zip("xyz", (frame.x, frame.y, frame.z),
-                                                                   strict=True)), sp.S.Zero * frame.x)
-    body_origin = origin.locatenew(f"{name}_origin", sum(
-        (p * axis for p, axis in zip(position, (frame.x, frame.y, frame.z), strict=True)), shift))
+    shift = in_frame(frame, [coordinates.get(d, ZERO) for d in ("x", "y", "z")])
+    body_origin = origin.locatenew(f"{name}_origin", in_frame(frame, position) + shift)
     body_origin.set_vel(frame, shift.dt(frame))
-    centre = body_origin.locatenew(f"{name}_com", com[0] * body_frame.x + com[1] * body_frame.y
-                                   + com[2] * body_frame.z)
-    centre.v2pt_theory(body_origin, frame, body_frame)
-    dyadic = inertia(body_frame, inertia_matrix[0, 0], inertia_matrix[1, 1], inertia_matrix[2, 2],
-                     inertia_matrix[0, 1], inertia_matrix[1, 2], inertia_matrix[0, 2])
-    return body_frame, body_origin, RigidBody(name, centre, body_frame, mass, (dyadic, centre))
+    return body_frame, body_origin
 
 
 def body_point(name: str, body_origin: Point, body_frame: ReferenceFrame, frame: ReferenceFrame,
                r: Sequence[sp.Expr]) -> Point:
     """A point fixed in a body at ``r`` (body frame) from its origin."""
-    point = body_origin.locatenew(name, r[0] * body_frame.x + r[1] * body_frame.y + r[2] * body_frame.z)
+    point = body_origin.locatenew(name, in_frame(body_frame, r))
     point.v2pt_theory(body_origin, frame, body_frame)
     return point
 
@@ -205,7 +207,8 @@ def chain_structure() -> Structure:
               stiffness={"x": "kg", "y": "kg", "z": "kg"}, damping={"x": "cg", "z": "cg"})
     b.element("foot_b", bodies=("ground", "lower"), at=[-0.2, -0.1, -0.1],
               stiffness={"x": "kg", "y": "kg", "z": "kg"}, damping={"y": "cg"})
-    b.element("joint", bodies=("lower", "upper"), at=[0.05, 0.02, 0.25], axes={"x": [1, 2, 2], "y": [2, 1, -2]},
+    b.element("joint", bodies=("lower", "upper"), at=[0.05, 0.02, 0.25],
+              axes={"x": [1, 2, 2], "y": [2, 1, -2]},
               stiffness={"x": "kb", "y": "kb", "z": "kb", "rx": "kr", "ry": "kr", "rz": "kr"},
               damping={"z": "cb", "ry": "cr"})
     b.element("joint_b", bodies=("upper", "lower"), points=([0.1, 0, -0.1], [0.1, 0, 0.3]),
@@ -268,19 +271,41 @@ def test_spinning_rotor_matches_lagrange() -> None:
     assert sp.expand(g[rx, ry] - symbol("Ip") * symbol("Omega")) == 0
 
 
+def test_rotor_spinning_about_a_tilted_axis_matches_lagrange() -> None:
+    """G = -Ip Omega [n]x for a spin axis that is not a coordinate axis (sign and orientation of [n]x)."""
+    n = sp.Matrix([sp.Rational(3, 5), 0, sp.Rational(4, 5)])
+    b = StructureBuilder("tilted-rotor")
+    s = params(b, {"m": (2.0, "mass"), "Id": (0.1, "inertia"), "Ip": (0.03, "inertia"),
+                   "k": (1.0e6, "stiffness"), "Omega": (100.0, "other")})
+    tensor = s["Id"] * sp.eye(3) + (s["Ip"] - s["Id"]) * n * n.T  # axisymmetric about n
+    b.body("rotor", mass="m", inertia=tensor.tolist(), dofs=["x", "rx", "ry", "rz"],
+           spin={"axis": list(n), "speed": "Omega"})
+    b.element("front", bodies=("ground", "rotor"), at=[0, 0.1, 0.2], stiffness={"x": "k", "y": "k", "z": "k"})
+    b.element("rear", bodies=("ground", "rotor"), at=[0.1, 0, -0.2], stiffness={"x": "k", "y": "k", "z": "k"})
+    structure = b.build()
+    reference = assert_matches_lagrange(structure)
+    expected = -s["Ip"] * s["Omega"] * sp.Matrix([[0, -n[2], n[1]], [n[2], 0, -n[0]], [-n[1], n[0], 0]])
+    assert (reference["G"][1:, 1:] - expected).applyfunc(sp.expand) == sp.zeros(3, 3)
+
+
 def test_spindle_bearing_matches_lagrange() -> None:
     assert_matches_lagrange(load_model("builtin:spindle-bearing"))
 
 
 def test_lagrange_rejects_a_rotor_that_is_not_axisymmetric() -> None:
-    from cappe.exceptions import ModelError
+    # the builder already refuses such a body; a hand-made Structure must still be refused by the reference
+    import dataclasses
 
     b = StructureBuilder("lopsided")
-    b.body("r", mass=1, inertia={"xx": 1, "yy": 2, "zz": 3, "xz": sp.Rational(1, 10)}, dofs=["rx", "ry"],
-           spin={"axis": "z", "speed": 10})
+    b.body("r", mass=1, inertia={"xx": 1, "yy": 1, "zz": 3}, dofs=["rx", "ry"], spin={"axis": "z", "speed": 10})
     b.element("e", bodies=("ground", "r"), stiffness={"rx": 1, "ry": 1})
     with pytest.raises(ModelError, match="axisymmetric"):
-        lagrange_matrices(b.build())
+        b.body("q", mass=1, inertia={"xx": 1, "yy": 2, "zz": 3, "xz": sp.Rational(1, 10)}, spin={"axis": "z", "speed": 10})
+    good = b.build()
+    lopsided = sp.ImmutableMatrix([[1, 0, sp.Rational(1, 10)], [0, 2, 0], [sp.Rational(1, 10), 0, 3]])
+    bad = dataclasses.replace(good, bodies=(dataclasses.replace(good.bodies[0], inertia=lopsided),))
+    with pytest.raises(ModelError, match="axisymmetric"):
+        lagrange_matrices(bad)
 
 
 # -- (b) against sympy.physics.mechanics models written from scratch -----------------------------------
@@ -316,6 +341,14 @@ def test_two_mass_rig_matches_lagranges_method() -> None:
     assert model.G == sp.zeros(2, 2)
 
 
+RIGID_BLOCK_POSITION = (sp.Rational(1, 5), sp.Rational(-1, 10), sp.Rational(3, 10))
+RIGID_BLOCK_MOUNTS = (  # attachment point (body frame), local x and y axes (rational direction cosines)
+    ((sp.Rational(1, 10), sp.Rational(1, 5), sp.Rational(-1, 10)), {"x": [3, 4, 0], "y": [-4, 3, 0]}),
+    ((sp.Rational(-1, 10), sp.Rational(1, 5), sp.Rational(-1, 10)), {"x": [1, 0, 0], "y": [0, 1, 0]}),
+    ((sp.Rational(0), sp.Rational(-1, 5), sp.Rational(-1, 10)), {"x": [2, 2, 1], "y": [1, -2, 2]}),
+)
+
+
 def rigid_block_structure() -> Structure:
     """A 6-DOF block off the global origin, offset centre of mass, springs at offset points (cappe side)."""
     b = StructureBuilder("rigid-block")
@@ -335,14 +368,6 @@ def rigid_block_structure() -> Structure:
     return b.build()
 
 
-RIGID_BLOCK_POSITION = (sp.Rational(1, 5), sp.Rational(-1, 10), sp.Rational(3, 10))
-RIGID_BLOCK_MOUNTS = (  # attachment point (body frame), local x and y axes (rational direction cosines)
-    ((sp.Rational(1, 10), sp.Rational(1, 5), sp.Rational(-1, 10)), {"x": [3, 4, 0], "y": [-4, 3, 0]}),
-    ((sp.Rational(-1, 10), sp.Rational(1, 5), sp.Rational(-1, 10)), {"x": [1, 0, 0], "y": [0, 1, 0]}),
-    ((sp.Rational(0), sp.Rational(-1, 5), sp.Rational(-1, 10)), {"x": [2, 2, 1], "y": [1, -2, 2]}),
-)
-
-
 def test_rigid_block_matches_kanes_method() -> None:
     structure = rigid_block_structure()
     s = {n: symbol(n) for n in structure.parameter_names}
@@ -351,21 +376,20 @@ def test_rigid_block_matches_kanes_method() -> None:
     frame = ReferenceFrame("N")
     origin = Point("O")
     origin.set_vel(frame, 0)
-    inertia_matrix = sp.Matrix([[s["Ixx"], s["Ixy"], s["Ixz"]], [s["Ixy"], s["Iyy"], s["Iyz"]],
-                                [s["Ixz"], s["Iyz"], s["Izz"]]])
-    body_frame, body_origin, body = rigid_body("block", frame, origin, dict(zip(DIRECTIONS, q, strict=True)),
-                                               RIGID_BLOCK_POSITION, s["m"], inertia_matrix,
-                                               (s["ox"], s["oy"], s["oz"]))
+    body_frame, body_origin = moving_frame("block", frame, origin, dict(zip(DIRECTIONS, q, strict=True)),
+                                           RIGID_BLOCK_POSITION)
+    centre = body_point("block_com", body_origin, body_frame, frame, (s["ox"], s["oy"], s["oz"]))
+    central = inertia(body_frame, s["Ixx"], s["Iyy"], s["Izz"], s["Ixy"], s["Iyz"], s["Ixz"])
+    body = RigidBody("block", centre, body_frame, s["m"], (central, centre))
     loads: list[tuple[Point, object]] = []
     for i, (point, axes) in enumerate(RIGID_BLOCK_MOUNTS):
         on_body = body_point(f"mount{i}", body_origin, body_frame, frame, point)
-        on_ground = origin.locatenew(f"ground{i}", sum(
-            ((RIGID_BLOCK_POSITION[j] + point[j]) * e for j, e in enumerate((frame.x, frame.y, frame.z))),
-            sp.S.Zero * frame.x))
+        on_ground = origin.locatenew(f"ground{i}", in_frame(frame, [RIGID_BLOCK_POSITION[j] + point[j]
+                                                                    for j in range(3)]))
         on_ground.set_vel(frame, 0)
         ex, ey = unit(axes["x"]), unit(axes["y"])
         for e, k, c in ((ex, "k1", "d1"), (ey, "k2", "d2"), (ex.cross(ey), "k3", "d3")):
-            direction = e[0] * frame.x + e[1] * frame.y + e[2] * frame.z
+            direction = in_frame(frame, e)
             loads += spring_damper(on_body, on_ground, origin, frame, direction, s[k], s[c], q)
     mass, damping, stiffness = kane_linear(frame, q, [body], loads)
     model = SymbolicModel(structure)
@@ -386,8 +410,7 @@ def test_spinning_rotor_matches_kanes_method() -> None:
     origin.set_vel(frame, 0)
     coordinates = dict(zip(("x", "y", "rx", "ry"), q, strict=True))
     # The shaft frame tilts with (rx, ry); the rotor frame spins in it about the shaft axis at Omega.
-    shaft_frame, shaft_origin, _ = rigid_body("shaft", frame, origin, coordinates, (0, 0, 0), s["m"],
-                                              sp.eye(3), (0, 0, 0))
+    shaft_frame, shaft_origin = moving_frame("shaft", frame, origin, coordinates, (0, 0, 0))
     rotor_frame = shaft_frame.orientnew("rotor_frame", "Axis", (s["Omega"] * t, shaft_frame.z))
     centre = body_point("rotor_com", shaft_origin, shaft_frame, frame, (0, 0, s["lc"]))
     # axisymmetric, so the central inertia dyadic reads the same in the shaft and rotor bases
@@ -470,6 +493,7 @@ PROPERTY_SETTINGS = settings(max_examples=20, deadline=None, database=None,
 @PROPERTY_SETTINGS
 @given(random_structures())
 def test_random_structure_matrices_have_the_right_symmetry_and_definiteness(structure: Structure) -> None:
+    """M, K, C symmetric; M positive definite; K, C positive semi-definite; G skew (zero without spin)."""
     model = SymbolicModel(structure)
     m, c, k, g = (sp.Matrix(getattr(model, name)) for name in MATRICES)
     # entries are exact rationals, so every check below is exact
@@ -488,8 +512,9 @@ def test_random_structure_matrices_have_the_right_symmetry_and_definiteness(stru
 
 
 @pytest.mark.slow
-@settings(max_examples=10, deadline=None, database=None,
+@settings(max_examples=6, deadline=None, database=None,
           suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 @given(random_structures())
 def test_random_structures_match_lagrange(structure: Structure) -> None:
+    """The same random structures, compared entry by entry with the energy-based reference."""
     assert_matches_lagrange(structure)

@@ -165,3 +165,12 @@ def test_unknown_parameter_override_is_an_error(two_mass):
 def test_unknown_axis_is_an_error(two_mass):
     with pytest.raises(ModelError, match=r"unknown axis 'z' for model 'two-mass-rig'"):
         two_mass.resolve_position({"z": 0.1})
+
+
+def test_spinning_body_must_be_axisymmetric():
+    b = StructureBuilder("rotor")
+    b.parameter("m", 1.0, kind="mass")
+    b.parameter("W", 100.0, kind="other")
+    with pytest.raises(ModelError, match=r"spinning body 'r' must be axisymmetric about its spin axis"):
+        b.body("r", mass="m", inertia={"xx": 0.1, "yy": 0.2, "zz": 0.05, "yz": 0.01}, spin={"axis": "z", "speed": "W"})
+    b.body("s", mass="m", inertia={"xx": 0.1, "yy": 0.1, "zz": 0.05}, spin={"axis": "z", "speed": "W"})

@@ -16,7 +16,12 @@ and not built on the small-angle formula). Then
 
 ``M = d2T/dqd2``, ``K = d2V/dq2``, ``C = d2D/dqd2`` and ``G = N - N^T`` with ``N_ij = d2T/(dqd_i dq_j)``,
 
-all at ``q = qd = 0``. Time derivatives use the chain rule ``d/dt f(q) = sum_i df/dq_i qd_i``.
+all at ``q = qd = 0``. Time derivatives use the chain rule ``d/dt f(q) = sum_i df/dq_i qd_i``. The
+derivatives are taken in the cheapest exact order (q or qd set to 0 as soon as the remaining derivatives no
+longer need it; K by the product rule ``d2(k l^2 / 2) = k (dl dl^T + l d2l)``, where ``l = 0`` at rest).
+
+For an axisymmetric rotor the spin adds ``Omega Ip w . (R n)`` and the constant ``Omega^2 Ip / 2`` to T:
+the first gives ``G = -Ip Omega [n]x``, the second no stiffness (K comes from V alone).
 
 Everything is exact and symbolic, so the cost grows quickly with the number of DOFs: this is for small
 models, tests and model checks, not for hot paths. The hysteretic matrix H is not derived here (it is not
@@ -113,9 +118,11 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
             if stiffness == 0 and damping == 0:
                 continue
             elongation = _elongation(element, d, poses, nominal)
-            springs.append((stiffness, elongation))
-            rate = dt(sp.Matrix([elongation]))[0, 0]
-            dissipation.append(damping * rate**2 / 2)
+            if stiffness != 0:
+                springs.append((stiffness, elongation))
+            if damping != 0:
+                rate = dt(sp.Matrix([elongation]))[0, 0]
+                dissipation.append(damping * rate**2 / 2)
 
     q_rest = {s: sp.Integer(0) for s in q}
     qd_rest = {s: sp.Integer(0) for s in qd}
@@ -212,7 +219,8 @@ def _kinetic_energy(body: Body, pose: _Pose, dt: Callable[[sp.Matrix], sp.Matrix
         if residue != sp.zeros(3, 1):
             msg = (
                 f"body {body.name!r}: the reference derivation needs a rotor axisymmetric about its spin "
-                f"axis (inertia @ n == polar_inertia * n); got inertia @ n - polar_inertia * n = {list(residue)}"
+                f"axis (inertia @ n == polar_inertia * n); got inertia @ n - polar_inertia * n = "
+                f"{list(residue)}"
             )
             raise ModelError(msg)
         omega = omega + body.spin.speed * rotation * n
@@ -233,8 +241,9 @@ def _elongation(element: StiffnessDampingElement, direction: str, poses: Mapping
     pose_a, pose_b = poses[element.body_a], poses[element.body_b]
     if k < 3:
         gap = pose_b.point(element.point_b) - pose_a.point(element.point_a)
-        gap_0 = nominal[element.body_b].point(element.point_b) - nominal[element.body_a].point(element.point_a)
-        return (axis.T * (gap - gap_0))[0, 0]
+        nominal_b = nominal[element.body_b].point(element.point_b)
+        nominal_a = nominal[element.body_a].point(element.point_a)
+        return (axis.T * (gap - (nominal_b - nominal_a)))[0, 0]
     relative = pose_a.rotation.T * pose_b.rotation
     return (axis.T * _vee(relative))[0, 0]
 

@@ -587,12 +587,30 @@ class StructureBuilder:
             raise ModelError(msg)
         axis = self._vector(spin.get("axis", "z"), f"{where}.axis", unit=True)
         speed = self._expr(spin["speed"], f"{where}.speed")
+        self._check_axisymmetric(name, tensor, axis, where)
         if "polar_inertia" in spin:
             polar = self._expr(spin["polar_inertia"], f"{where}.polar_inertia")
         else:
             n = sp.Matrix(axis)
             polar = sp.simplify((n.T * tensor * n)[0, 0])
         return Spin(axis=axis, speed=speed, polar_inertia=polar)
+
+    def _check_axisymmetric(self, name: str, tensor: sp.ImmutableMatrix, axis: Vector3, where: str) -> None:
+        """A steadily spinning body must be axisymmetric about its spin axis (I n parallel to n).
+
+        Otherwise its inertia seen from the non-rotating frame varies with time and the model is not
+        time-invariant; the gyroscopic matrix -Ip Omega [n]x assumes I n = Ip n.
+        """
+        n = sp.Matrix(axis)
+        residual = tensor * n - (n.T * tensor * n)[0, 0] * n
+        size = self._nominal_value(sum((tensor * n)[i] ** 2 for i in range(3)))
+        worst = self._nominal_value(-sum(residual[i] ** 2 for i in range(3)))
+        if size is not None and worst is not None and -worst > 1e-18 * max(size, 1e-300):
+            msg = (
+                f"spinning body {name!r} must be axisymmetric about its spin axis (inertia tensor times the "
+                f"axis must be parallel to the axis); got I n = {[str(v) for v in tensor * n]} ({where})"
+            )
+            raise ModelError(msg)
 
     def element(
         self,
