@@ -174,3 +174,13 @@ def test_spinning_body_must_be_axisymmetric():
     with pytest.raises(ModelError, match=r"spinning body 'r' must be axisymmetric about its spin axis"):
         b.body("r", mass="m", inertia={"xx": 0.1, "yy": 0.2, "zz": 0.05, "yz": 0.01}, spin={"axis": "z", "speed": "W"})
     b.body("s", mass="m", inertia={"xx": 0.1, "yy": 0.1, "zz": 0.05}, spin={"axis": "z", "speed": "W"})
+
+
+def test_checks_cover_every_combination_of_axis_positions():
+    # the mass is negative only where both axes are at 1: each combination of positions must be checked
+    b = StructureBuilder("two-axes")
+    b.parameter("m", 0.5, kind="mass")
+    b.axis("a", [0.0, 1.0])
+    b.axis("b", [0.0, 1.0])
+    with pytest.raises(ModelError, match=r"body 'slide' mass must be > 0; got -0\.5"):
+        b.body("slide", mass="m - a*b", dofs=["x"])

@@ -7,7 +7,6 @@ import json
 import math
 import sys
 from collections.abc import Mapping
-from pathlib import Path
 from typing import Any
 
 from cappe.exceptions import DataError, ModelError
@@ -120,7 +119,3 @@ def names(value: str | None) -> list[str] | None:
     if value is None:
         return None
     return [v.strip() for v in value.split(",") if v.strip()]
-
-
-def path_arg(value: str) -> Path:
-    return Path(value)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 import warnings
 from typing import Any
 
@@ -154,8 +155,7 @@ def matrices(args: argparse.Namespace) -> int:
         from cappe.model import derive
 
         sym = derive(ctx.structure)
-        fixed = {k: v for k, v in ctx.position.items()} if ctx.structure.axes and args.position else {}
-        mats = sym.substitute(fixed) if fixed else sym.matrices()
+        mats = sym.substitute(ctx.position) if ctx.structure.axes and args.position else sym.matrices()
         data: dict[str, Any] = {
             "dofs": list(ctx.structure.dofs),
             "matrices": {k: [[str(v) for v in row] for row in m.tolist()] for k, m in mats.items()},
@@ -180,13 +180,14 @@ def matrices(args: argparse.Namespace) -> int:
 # -- modes ------------------------------------------------------------------------------------------
 def modes(args: argparse.Namespace) -> int:
     ctx = ModelContext(args)
-    result = ctx.system().modes(args.damping)
+    system = ctx.system()
+    result = system.modes(args.damping)
     data = result.to_dict()
     data["position"] = ctx.position
     notes = []
     if args.damping == "exact":
         # how far the light-damping (first-order) estimate is from the exact complex modes
-        approx = ctx.system().modes("first-order")
+        approx = system.modes("first-order")
         if approx.n_modes == result.n_modes:
             safe = np.where(result.frequency > 0, result.frequency, 1.0)
             df = float(np.max(np.abs(approx.frequency - result.frequency) / safe, initial=0.0))
@@ -222,12 +223,11 @@ def _transfer(ctx: ModelContext, args: argparse.Namespace) -> Any:
             if args.exact:
                 result = exact_transfer_function(sym, args.input, args.output, ctx.values, ctx.position)
             else:
-                fixed = {k: v for k, v in ctx.overrides.items()}
                 result = symbolic_transfer_function(
-                    sym, args.input, args.output, fixed, ctx.position if s.axes and args.position else None
+                    sym, args.input, args.output, ctx.overrides, ctx.position if s.axes and args.position else None
                 )
         for w in caught:
-            print(f"cappe: warning: {w.message}", file=__import__("sys").stderr)
+            print(f"cappe: warning: {w.message}", file=sys.stderr)
         return result
     return transfer_function(ctx.system().state_space(args.input, args.output), args.input, args.output)
 
@@ -237,14 +237,9 @@ def _poly_text(coefs: tuple[Any, ...], kind: str) -> str:
     terms = []
     for k, c in enumerate(coefs):
         power = n - k
-        if kind == "float":
-            if c == 0:
-                continue
-            value = f"{float(c):.6g}"
-        else:
-            if c == 0:
-                continue
-            value = f"({c})"
+        if c == 0:
+            continue
+        value = f"{float(c):.6g}" if kind == "float" else f"({c})"
         terms.append(value + ("" if power == 0 else (" s" if power == 1 else f" s^{power}")))
     return " + ".join(terms) if terms else "0"
 

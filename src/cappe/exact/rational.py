@@ -12,10 +12,9 @@ from sympy.polys.matrices import DomainMatrix
 from cappe.exceptions import ModelError
 from cappe.model._expressions import symbol
 from cappe.model.symbolic import SymbolicModel
+from cappe.systems.mechanical import DERIVATIVE_ORDER
 
 __all__ = ["ExactStateSpace", "exact_state_space", "rational_values", "to_rational"]
-
-_DERIVATIVE = {"displacement": 0, "elongation": 0, "velocity": 1, "acceleration": 2}
 
 
 def to_rational(value: object) -> sp.Rational:
@@ -101,7 +100,7 @@ def exact_state_space(
     cc = sp.zeros(len(outs), 2 * n)
     dd = sp.zeros(len(outs), len(ins))
     for r, name in enumerate(outs):
-        order = _DERIVATIVE[model.structure.output(name).quantity]
+        order = DERIVATIVE_ORDER[model.structure.output(name).quantity]
         row = s_rows[r, :]
         if order == 0:
             cc[r, :n] = row

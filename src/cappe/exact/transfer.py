@@ -13,8 +13,10 @@ from collections.abc import Mapping
 import sympy as sp
 from sympy.polys.matrices import DomainMatrix
 
-from cappe.exact.rational import _DERIVATIVE, rational_values, warn_hysteretic
+from cappe.exact.rational import rational_values, to_rational, warn_hysteretic
+from cappe.model._expressions import symbol
 from cappe.model.symbolic import SymbolicModel
+from cappe.systems.mechanical import DERIVATIVE_ORDER
 from cappe.systems.transfer import TransferFunctionModel
 
 __all__ = ["S", "exact_transfer_function", "symbolic_transfer_function"]
@@ -41,7 +43,7 @@ def _polynomials(
     gens = [S, *sorted((z.free_symbols | row.free_symbols | col.free_symbols) - {S}, key=lambda x: x.name)]
     den = _det(z, gens)
     num = -_det(bordered, gens)
-    num = num * sp.Poly(S ** _DERIVATIVE[quantity], *gens)
+    num = num * sp.Poly(S ** DERIVATIVE_ORDER[quantity], *gens)
     return num, den
 
 
@@ -102,9 +104,6 @@ def symbolic_transfer_function(
     ``values`` may fix some parameters (exact rationals); ``position`` fixes axis coordinates (default: the
     symbols stay). Intended for small models: the cost grows quickly with the number of DOFs.
     """
-    from cappe.exact.rational import to_rational
-    from cappe.model._expressions import symbol
-
     subs = {symbol(k): to_rational(v) for k, v in (values or {}).items()}
     subs.update({symbol(k): to_rational(v) for k, v in (position or {}).items()})
     num, den = _polynomials(model, input, output, subs)

@@ -230,8 +230,9 @@ def _kinetic_energy(body: Body, pose: _Pose, dt: Callable[[sp.Matrix], sp.Matrix
     return translational + rotational
 
 
-def _elongation(element: StiffnessDampingElement, direction: str, poses: Mapping[str, _Pose],
-                nominal: Mapping[str, _Pose]) -> sp.Expr:
+def _elongation(
+    element: StiffnessDampingElement, direction: str, poses: Mapping[str, _Pose], nominal: Mapping[str, _Pose]
+) -> sp.Expr:
     """Nonlinear elongation of ``element`` in its local ``direction`` (zero at q = 0).
 
     ``poses`` are the bodies' poses as functions of q, ``nominal`` the same poses at q = 0.
@@ -246,4 +247,3 @@ def _elongation(element: StiffnessDampingElement, direction: str, poses: Mapping
         return (axis.T * (gap - (nominal_b - nominal_a)))[0, 0]
     relative = pose_a.rotation.T * pose_b.rotation
     return (axis.T * _vee(relative))[0, 0]
-

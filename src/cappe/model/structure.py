@@ -25,12 +25,14 @@ Conventions (SI units throughout)
 
 from __future__ import annotations
 
+import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from types import MappingProxyType
 from typing import Any
 
+import numpy as np
 import sympy as sp
 
 from cappe.exceptions import ModelError
@@ -362,21 +364,18 @@ class StructureBuilder:
             vec = tuple(sp.simplify(v / norm) for v in vec)
         return vec  # type: ignore[return-value]
 
-    def _nominal_value(self, expr: sp.Expr) -> float | None:
-        """Value of ``expr`` at nominal parameters, at every listed axis position; worst case returned.
+    def _evaluation_points(self) -> list[dict[sp.Symbol, sp.Float]]:
+        """Substitutions for validation: nominal parameters at every combination of listed axis positions."""
+        params = {symbol(p.name): sp.Float(p.value) for p in self._parameters}
+        grids = [[(symbol(a.name), sp.Float(v)) for v in (a.positions or (0.0,))] for a in self._axes]
+        return [{**params, **dict(combo)} for combo in itertools.product(*grids)]
 
-        Returns None if the expression cannot be evaluated to a real number.
-        """
-        subs = {symbol(p.name): sp.Float(p.value) for p in self._parameters}
-        positions = (
-            [{}]
-            if not self._axes
-            else [{symbol(a.name): sp.Float(v)} for a in self._axes for v in (a.positions or (0.0,))]
-        )
+    def _nominal_value(self, expr: sp.Expr) -> float | None:
+        """Smallest value of ``expr`` over :meth:`_evaluation_points`; None if it is not a real number."""
         values = []
-        for pos in positions:
+        for subs in self._evaluation_points():
             try:
-                values.append(float(sp.sympify(expr).xreplace({**subs, **pos}).evalf()))
+                values.append(float(sp.sympify(expr).xreplace(subs).evalf()))
             except (TypeError, ValueError):
                 return None
         return min(values) if values else None
@@ -562,19 +561,13 @@ class StructureBuilder:
         return tensor
 
     def _check_positive_definite(self, name: str, tensor: sp.ImmutableMatrix, where: str) -> None:
-        import numpy as np
-
-        subs = {symbol(p.name): p.value for p in self._parameters}
-        positions = (
-            [{}] if not self._axes else [{symbol(a.name): v} for a in self._axes for v in (a.positions or (0.0,))]
-        )
-        for pos in positions:
+        for subs in self._evaluation_points():
             try:
-                values = np.array(tensor.xreplace({**subs, **pos}).evalf(), dtype=float)
+                values = np.array(tensor.xreplace(subs).evalf(), dtype=float)
             except (TypeError, ValueError):
                 return
             eig = np.linalg.eigvalsh(values)
-            if eig.min() <= 1e-12 * max(1.0, abs(eig).max()):
+            if eig.min() <= 1e-12 * abs(eig).max():
                 msg = (
                     f"body {name!r} inertia tensor must be positive definite; eigenvalues "
                     f"{', '.join(f'{e:.4g}' for e in eig)} kg m^2 ({where})"
@@ -659,13 +652,10 @@ class StructureBuilder:
             point_a = self._vector(pts[0], f"{where}.points[0]")
             point_b = self._vector(pts[1], f"{where}.points[1]")
         frame = self._frame(name, axes, f"{where}.axes")
-        groups = {}
-        for label, table, kind in (
-            ("stiffness", stiffness, "stiffness"),
-            ("damping", damping, "damping"),
-            ("loss", loss, "loss"),
-        ):
-            groups[label] = self._directional(name, label, table or {}, f"{where}.{label}", kind)
+        groups = {
+            label: self._directional(name, label, table or {}, f"{where}.{label}")
+            for label, table in (("stiffness", stiffness), ("damping", damping), ("loss", loss))
+        }
         if not any(groups.values()):
             msg = f"element {name!r} has no stiffness, damping or loss in any direction ({where})"
             raise ModelError(msg)
@@ -706,9 +696,7 @@ class StructureBuilder:
         ez = ex.cross(ey)
         return sp.ImmutableMatrix(sp.Matrix.hstack(ex, ey, sp.simplify(ez)))
 
-    def _directional(
-        self, name: str, label: str, table: Mapping[str, object], where: str, kind: str
-    ) -> Mapping[str, sp.Expr]:
+    def _directional(self, name: str, label: str, table: Mapping[str, object], where: str) -> Mapping[str, sp.Expr]:
         if not isinstance(table, Mapping):
             msg = f"element {name!r} {label} must map directions to values; got {table!r} ({where})"
             raise ModelError(msg)
@@ -722,18 +710,9 @@ class StructureBuilder:
                 raise ModelError(msg)
             expr = self._expr(value, f"{where}.{direction}")
             nominal = self._nominal_value(expr)
-            if nominal is not None:
-                if kind == "stiffness" and nominal < 0:
-                    msg = (
-                        f"element {name!r} stiffness {direction!r} must be >= 0; "
-                        f"got {nominal:.6g} ({where}.{direction})"
-                    )
-                    raise ModelError(msg)
-                if kind != "stiffness" and nominal < 0:
-                    msg = (
-                        f"element {name!r} {label} {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
-                    )
-                    raise ModelError(msg)
+            if nominal is not None and nominal < 0:
+                msg = f"element {name!r} {label} {direction!r} must be >= 0; got {nominal:.6g} ({where}.{direction})"
+                raise ModelError(msg)
             out[direction] = expr
         return MappingProxyType({d: out[d] for d in DIRECTIONS if d in out})
 

@@ -19,10 +19,11 @@ from cappe.systems.frf import FRFData
 from cappe.systems.modal import ModalSet
 from cappe.systems.statespace import StateSpaceModel
 
-__all__ = ["MechanicalSystem"]
+__all__ = ["DERIVATIVE_ORDER", "MechanicalSystem"]
 
 Array = NDArray[np.float64]
-_DERIVATIVE = {"displacement": 0, "elongation": 0, "velocity": 1, "acceleration": 2}
+#: Time-derivative order of each output quantity with respect to its displacement-level row.
+DERIVATIVE_ORDER = {"displacement": 0, "elongation": 0, "velocity": 1, "acceleration": 2}
 
 
 @dataclass(frozen=True)
@@ -220,7 +221,7 @@ class MechanicalSystem:
         d = np.zeros((len(oo), len(ii)))
         for row, k in enumerate(oo):
             s = self.S[k]
-            order = _DERIVATIVE[self.output_quantities[k]]
+            order = DERIVATIVE_ORDER[self.output_quantities[k]]
             if order == 0:
                 c[row, :n] = s
             elif order == 1:
@@ -271,7 +272,7 @@ class MechanicalSystem:
                     )
         s = self.S[oo]
         h = np.einsum("oi,fij->ojf", s, x)
-        orders = np.array([_DERIVATIVE[self.output_quantities[k]] for k in oo])
+        orders = np.array([DERIVATIVE_ORDER[self.output_quantities[k]] for k in oo])
         h = h * ((1j * w)[None, None, :] ** orders[:, None, None])
         return FRFData(
             f,
@@ -300,7 +301,7 @@ class MechanicalSystem:
             np.abs(rigid.T @ self.B[:, ii]).max(axis=0) > 1e-9 * scale_b if rigid.size else np.zeros(len(ii), bool)
         )
         for row, o in enumerate(oo):
-            if _DERIVATIVE[self.output_quantities[o]] > 0:
+            if DERIVATIVE_ORDER[self.output_quantities[o]] > 0:
                 continue
             sees = bool(rigid.size) and np.abs(self.S[o] @ rigid).max() > 1e-9 * (np.abs(self.S[o]).max() + 1e-300)
             values = np.real(self.S[o] @ x)

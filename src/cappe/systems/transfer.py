@@ -8,7 +8,6 @@ from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
-import sympy as sp
 from numpy.typing import NDArray
 
 from cappe.exceptions import ModelError
@@ -140,8 +139,3 @@ def _pick(names: Sequence[str], name: str | None, what: str) -> int:
         msg = f"unknown {what} {name!r}; known: {', '.join(names)}"
         raise ModelError(msg)
     return list(names).index(name)
-
-
-def coefficients_from_poly(poly: sp.Poly) -> tuple[sp.Expr, ...]:
-    """Coefficients of a univariate sympy Poly, highest power first."""
-    return tuple(poly.all_coeffs())
