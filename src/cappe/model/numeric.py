@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any, cast
 
 import numpy as np
+import scipy.sparse as sps
 import sympy as sp
 from numpy.typing import NDArray
 
@@ -21,7 +22,7 @@ from cappe.exceptions import ModelError
 from cappe.model.structure import Structure
 from cappe.model.symbolic import MATRIX_NAMES, SymbolicModel, Term
 
-__all__ = ["NumericModel", "compile_model"]
+__all__ = ["DampingSources", "NumericModel", "compile_model"]
 
 Array = NDArray[np.float64]
 ParamsLike = Mapping[str, float] | Sequence[float] | NDArray[np.floating[Any]] | None
@@ -32,6 +33,44 @@ class _MatrixPlan:
     affine_coefficients: list[sp.Expr]
     affine_patterns: list[sp.Matrix]
     residual: sp.Matrix | None
+
+
+@dataclass(frozen=True)
+class DampingSources:
+    """The damping sources of a model: one per element direction with viscous or hysteretic damping.
+
+    Source ``j`` adds ``coefficient[j] * h_j^T h_j`` to C (``kind == "viscous"``, coefficient c) or to H
+    (``kind == "hysteretic"``, coefficient eta * k), where ``h_j = rows[j]`` maps q to the element's
+    elongation in that direction. For a mass-normalized mode ``phi`` of natural frequency ``omega``, source j
+    contributes ``coefficient * (h phi)^2 / (2 omega)`` (viscous) or ``/ (2 omega^2)`` (hysteretic) to the
+    first-order damping ratio (paper eq. 12).
+
+    Attributes
+    ----------
+    names : tuple of str
+        ``"element.c<dir>"`` or ``"element.eta<dir>"``.
+    elements : tuple of str
+        Element of each source.
+    kinds : tuple of str
+        ``"viscous"`` or ``"hysteretic"``.
+    coefficients : ndarray, shape (B, n_sources)
+        c (N s/m or N m s/rad) or eta * k (N/m or N m/rad) per sample.
+    rows : ndarray, shape (n_sources, n_dof) or (B, n_sources, n_dof)
+        Elongation rows; per sample only when attachment points depend on parameters.
+    jacobian : ndarray, shape (B, n_sources, n_params)
+        Partial derivatives of the coefficients with respect to every model parameter.
+    """
+
+    names: tuple[str, ...]
+    elements: tuple[str, ...]
+    kinds: tuple[str, ...]
+    coefficients: Array
+    rows: Array
+    jacobian: Array
+
+    @property
+    def hysteretic(self) -> NDArray[np.bool_]:
+        return np.array([k == "hysteretic" for k in self.kinds], dtype=bool)
 
 
 def compile_model(model: Structure | SymbolicModel) -> NumericModel:
@@ -92,6 +131,100 @@ class NumericModel:
         self.output_names = tuple(o.name for o in self.structure.outputs)
         self.output_quantities = tuple(o.quantity for o in self.structure.outputs)
         self._pattern_cache: dict[tuple[float, ...], dict[str, Array]] = {}
+        self._compile_damping_sources()
+        self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
+        # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
+        self._jacobian_entries: list[tuple[int, int]] = []
+        derivatives: list[sp.Expr] = []
+        for j, expr in enumerate(coefficients):
+            for i, sym in enumerate(self._param_symbols):
+                d = sp.diff(expr, sym)
+                if d != 0:
+                    self._jacobian_entries.append((j, i))
+                    derivatives.append(d)
+        self._jacobian_func = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
+        self._residual_derivative_funcs = {
+            name: sp.lambdify(
+                all_symbols, [plan.residual.diff(sym) for sym in self._param_symbols], modules="numpy", cse=True
+            )
+            for name, plan in self._plans.items()
+            if plan.residual is not None
+        }
+
+    def _compile_damping_sources(self) -> None:
+        names: list[str] = []
+        elements: list[str] = []
+        kinds: list[str] = []
+        coefficients: list[sp.Expr] = []
+        rows: list[list[sp.Expr]] = []
+        for e in self.structure.elements:
+            for d in e.directions:
+                h = self.symbolic.elongation_row(e.name, d)
+                if not h:
+                    continue
+                dense = [h.get(j, sp.Integer(0)) for j in range(self.n_dof)]
+                found = []
+                if d in e.damping and e.damping[d] != 0:
+                    found.append((f"{e.name}.c{d}", "viscous", e.damping[d]))
+                if d in e.loss and e.loss[d] != 0 and d in e.stiffness:
+                    found.append((f"{e.name}.eta{d}", "hysteretic", e.loss[d] * e.stiffness[d]))
+                for name, kind, coefficient in found:
+                    names.append(name)
+                    kinds.append(kind)
+                    coefficients.append(coefficient)
+                    elements.append(e.name)
+                    rows.append(dense)
+        all_symbols = self._param_symbols + self._axis_symbols
+        self._source_names = tuple(names)
+        self._source_elements = tuple(elements)
+        self._source_kinds = tuple(kinds)
+        self._source_coef = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
+        self._source_rows = sp.lambdify(all_symbols, rows, modules="numpy", cse=True)
+        axis_set = set(self._axis_symbols)
+        self._source_rows_per_sample = any(
+            not sp.sympify(v).free_symbols <= axis_set for row in rows for v in row
+        )
+        self._source_jac_entries: list[tuple[int, int]] = []
+        derivatives: list[sp.Expr] = []
+        for j, expr in enumerate(coefficients):
+            for i, sym in enumerate(self._param_symbols):
+                d_expr = sp.diff(expr, sym)
+                if d_expr != 0:
+                    self._source_jac_entries.append((j, i))
+                    derivatives.append(d_expr)
+        self._source_jac = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
+
+    def damping_sources(
+        self, params: ParamsLike = None, position: Mapping[str, float] | None = None
+    ) -> DampingSources:
+        """The model's damping sources evaluated at a parameter vector or batch (see :class:`DampingSources`).
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> src = NumericModel(load_model("builtin:two-mass-rig")).damping_sources()
+        >>> src.names, src.coefficients
+        (('beam1.cx', 'spring12.cx', 'beam2.cx'), array([[13.42,  0.  ,  0.47]]))
+        """
+        p = self.vector(params)
+        pb = p if p.ndim == 2 else p[None, :]
+        pos = self.position_vector(position)
+        n_b, n_s, n = pb.shape[0], len(self._source_names), self.n_dof
+        args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(n_b, v) for v in pos]
+        coef = np.empty((n_b, n_s))
+        for j, v in enumerate(self._source_coef(*args) if n_s else []):
+            coef[:, j] = v
+        jac = np.zeros((n_b, n_s, pb.shape[1]))
+        if self._source_jac_entries:
+            for (j, i), v in zip(self._source_jac_entries, self._source_jac(*args), strict=True):
+                jac[:, j, i] = v
+        if self._source_rows_per_sample:
+            rows = np.empty((n_b, n_s, n))
+            for b in range(n_b):
+                rows[b] = np.asarray(self._source_rows(*pb[b], *pos), dtype=float).reshape(n_s, n)
+        else:
+            rows = np.asarray(self._source_rows(*pb[0], *pos), dtype=float).reshape(n_s, n)
+        return DampingSources(self._source_names, self._source_elements, self._source_kinds, coef, rows, jac)
 
     def _plan(self, terms: list[Term]) -> _MatrixPlan:
         axis_set = set(self._axis_symbols)
@@ -133,6 +266,7 @@ class NumericModel:
         return tuple(resolved[a] for a in self.axis_names)
 
     def _patterns(self, pos: tuple[float, ...]) -> dict[str, Array]:
+        """Dense patterns (n_terms, n*n) of every matrix at one axis position (cached)."""
         cached = self._pattern_cache.get(pos)
         if cached is None:
             n = self.n_dof
@@ -149,6 +283,37 @@ class NumericModel:
             self._pattern_cache[pos] = cached
         return cached
 
+    def _sparse_patterns(self, pos: tuple[float, ...]) -> dict[str, tuple[NDArray[np.intp], sps.csr_array]]:
+        """Per matrix: flat indices of its structural non-zeros and the (n_nz, n_terms) map onto them.
+
+        Assembling ``X[:, nz] = (P @ coef.T).T`` with a sparse ``P`` costs one multiply-add per stored
+        pattern entry and sample (a dense (n_terms, n*n) product costs n_terms * n*n), and each sample's
+        sum runs in the same fixed order whatever the batch size, so results do not depend on batching.
+        """
+        cached = self._sparse_cache.get(pos)
+        if cached is None:
+            cached = {}
+            for name, dense in self._patterns(pos).items():
+                nz = np.flatnonzero(np.any(dense != 0, axis=0))
+                cached[name] = (nz, sps.csr_array(dense[:, nz].T))
+            self._sparse_cache[pos] = cached
+        return cached
+
+    def coefficients(self, params: ParamsLike = None, position: Mapping[str, float] | None = None) -> Array:
+        """Affine coefficients ``f_j(p, r)`` of all matrix terms: (n_coef,) or (B, n_coef)."""
+        p = self.vector(params)
+        pb = p if p.ndim == 2 else p[None, :]
+        coef = self._coefficient_values(pb, self.position_vector(position))
+        return coef if p.ndim == 2 else coef[0]
+
+    def _coefficient_values(self, pb: Array, pos: tuple[float, ...]) -> Array:
+        args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]
+        coef = np.empty((pb.shape[0], self._n_coef))
+        if self._n_coef:
+            for j, v in enumerate(self._coefficients(*args)):
+                coef[:, j] = v
+        return coef
+
     # -- evaluation -------------------------------------------------------------------------------
     def matrices(
         self,
@@ -162,21 +327,58 @@ class NumericModel:
         pb = p if batch else p[None, :]
         pos = self.position_vector(position)
         n = self.n_dof
-        args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]
-        coef = np.empty((pb.shape[0], self._n_coef))
-        if self._n_coef:
-            values = self._coefficients(*args)
-            for j, v in enumerate(values):
-                coef[:, j] = v
-        patterns = self._patterns(pos)
+        coef = self._coefficient_values(pb, pos)
+        sparse = self._sparse_patterns(pos)
         out: dict[str, Array] = {}
         for name in names:
-            mats = (coef[:, self._slices[name]] @ patterns[name]).reshape(pb.shape[0], n, n)
+            nz, pattern = sparse[name]
+            flat = np.zeros((pb.shape[0], n * n))
+            if nz.size:
+                flat[:, nz] = (pattern @ np.ascontiguousarray(coef[:, self._slices[name]].T)).T
+            mats = flat.reshape(pb.shape[0], n, n)
             func = self._residual_funcs.get(name)
             if func is not None:
                 for b in range(pb.shape[0]):
                     mats[b] += np.asarray(func(*pb[b], *pos), dtype=float)
             out[name] = mats if batch else mats[0]
+        return out
+
+    def matrix_derivatives(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        names: Sequence[str] = MATRIX_NAMES,
+    ) -> dict[str, Array]:
+        """Exact partial derivatives of each matrix with respect to every parameter: (n_params, n, n).
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+        >>> nm.matrix_derivatives()["K"][nm.parameter_names.index("k12")]
+        array([[ 1., -1.],
+               [-1.,  1.]])
+        """
+        p = self.vector(params)
+        if p.ndim != 1:
+            msg = "matrix_derivatives takes a single parameter vector"
+            raise ModelError(msg)
+        pos = self.position_vector(position)
+        n, n_p = self.n_dof, len(self.parameter_names)
+        jac = np.zeros((self._n_coef, n_p))
+        if self._jacobian_entries:
+            values = self._jacobian_func(*p, *pos)
+            for (j, i), v in zip(self._jacobian_entries, values, strict=True):
+                jac[j, i] = float(v)
+        patterns = self._patterns(pos)
+        out: dict[str, Array] = {}
+        for name in names:
+            deriv = (jac[self._slices[name]].T @ patterns[name]).reshape(n_p, n, n)
+            func = self._residual_derivative_funcs.get(name)
+            if func is not None:
+                for i, mat in enumerate(func(*p, *pos)):
+                    deriv[i] += np.asarray(mat, dtype=float)
+            out[name] = deriv
         return out
 
     def io_matrices(

@@ -1,0 +1,479 @@
+"""Batched modal engine: many parameter vectors x axis positions -> modes, damping, shapes.
+
+Per chunk of samples: assemble M, K (and the damping sources) from the affine terms, reduce
+``K phi = lambda M phi`` with the Cholesky factor ``M = L L^T`` to the symmetric ``L^-1 K L^-T``, solve all
+problems with one batched ``eigh``, map back to mass-normalized shapes, and form the first-order damping
+ratios from the modal elongations of the damping sources. Chunks run on threads (see
+:mod:`cappe.parallel`); every sample goes through the same arithmetic whatever the chunk it lands in.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+
+from cappe.exceptions import ModelError
+from cappe.modal._batch import ModalBatch
+from cappe.model.numeric import DampingSources, NumericModel, ParamsLike
+from cappe.model.structure import Structure
+from cappe.parallel import map_chunks
+
+__all__ = ["ModalEngine", "ModeReference", "modal_batch"]
+
+Array = NDArray[np.float64]
+T = TypeVar("T")
+
+#: Eigenvalues below this fraction of the largest are rigid-body (zero-frequency) modes.
+RIGID_TOLERANCE = 1e-10
+#: Extra candidate modes considered when tracking, so a mode that drops out of the lowest band is found.
+TRACKING_MARGIN = 4
+
+
+@dataclass(frozen=True)
+class ModeReference:
+    """Reference modes that tracked evaluations are matched to (by mass-weighted MAC).
+
+    Attributes
+    ----------
+    shapes : ndarray, shape (n_dof, n_modes)
+        Mass-normalized real mode shapes at all DOFs.
+    mass : ndarray, shape (n_dof, n_dof)
+        Mass matrix of the reference, used to weight the MAC (units of translations and rotations differ).
+    frequency : ndarray, shape (n_modes,)
+        Reference natural frequencies in Hz.
+    """
+
+    shapes: Array
+    mass: Array
+    frequency: Array
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.shapes.shape[1])
+
+
+@dataclass
+class _Chunk:
+    frequency: Array
+    damping: Array
+    shapes: Array
+    mode_index: NDArray[np.intp]
+    tracking_mac: Array | None
+    contributions: Array | None
+    damping_gradient: Array | None
+    poles: NDArray[np.complex128] | None
+    complex_shapes: NDArray[np.complex128] | None
+    full_shapes: Array | None
+
+
+class ModalEngine:
+    """Fast modal analysis of a NumericModel for batches of parameter vectors at axis positions.
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model (a Structure is compiled).
+    sensors : sequence of str, "dofs" or None
+        Channels for the mode shapes: ``"node:x"`` labels or node names (all three directions). ``None``:
+        every channel of every sensor node of the model, or the DOFs if it has none. ``"dofs"``: the DOFs.
+    n_modes : int or None
+        Number of modes reported (lowest first); ``None``: all.
+    chunk_size : int
+        Samples per chunk; bounds memory (about ``chunk_size * 6 * n_dof**2`` floats in flight per worker).
+    n_workers : int or None
+        Worker threads; ``None``: one per core. Results are identical for any value.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> engine = ModalEngine(load_model("builtin:two-mass-rig"))
+    >>> batch = engine.evaluate([[1.39, 1.09, 1.38e6, 0.12e6, 0.24e6, 13.42, 0.0, 0.47]])
+    >>> batch.frequency.round(2)
+    array([[ 89.72, 166.29]])
+    """
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        *,
+        sensors: Sequence[str] | str | None = None,
+        n_modes: int | None = None,
+        chunk_size: int = 256,
+        n_workers: int | None = None,
+    ) -> None:
+        self.model = model if isinstance(model, NumericModel) else NumericModel(model)
+        n = self.model.n_dof
+        if n_modes is None:
+            n_modes = n
+        if isinstance(n_modes, bool) or not isinstance(n_modes, int) or not 1 <= n_modes <= n:
+            msg = f"n_modes must be an integer from 1 to n_dof = {n}; got {n_modes!r}"
+            raise ModelError(msg)
+        self.n_modes = n_modes
+        self.chunk_size = chunk_size
+        self.n_workers = n_workers
+        self._sensor_request = sensors
+        self._sensor_cache: dict[tuple[float, ...], tuple[tuple[str, ...], Array]] = {}
+        self._reference_cache: dict[tuple[float, ...], ModeReference] = {}
+        self.sensors = self._sensor_rows(self.model.structure.default_position())[0]
+
+    # -- sensors ----------------------------------------------------------------------------------
+    def _sensor_rows(self, position: Mapping[str, float] | None) -> tuple[tuple[str, ...], Array]:
+        pos = self.model.position_vector(position)
+        cached = self._sensor_cache.get(pos)
+        if cached is not None:
+            return cached
+        request = self._sensor_request
+        structure = self.model.structure
+        if request == "dofs" or (request is None and not structure.sensors):
+            cached = (self.model.dofs, np.eye(self.model.n_dof))
+        else:
+            labels, rows = self.model.sensor_matrix(position=position)
+            if request is not None and not isinstance(request, str):
+                wanted: list[int] = []
+                for item in request:
+                    hits = [i for i, lab in enumerate(labels) if lab == item or lab.split(":")[0] == item]
+                    if not hits:
+                        msg = (
+                            f"sensor {item!r} does not exist in model '{structure.name}'; known channels: "
+                            f"{', '.join(labels) or 'none'}"
+                        )
+                        raise ModelError(msg)
+                    wanted.extend(hits)
+                labels, rows = [labels[i] for i in wanted], rows[wanted]
+            elif isinstance(request, str):
+                msg = f"sensors must be a list of channel labels, 'dofs' or None; got {request!r}"
+                raise ModelError(msg)
+            for sensor in structure.sensors:
+                for value in self.model.symbolic.sensor_rows(sensor.name):
+                    for expr in value.values():
+                        free = {str(s) for s in getattr(expr, "free_symbols", set())}
+                        if free & set(self.model.parameter_names):
+                            msg = (
+                                f"sensor {sensor.name!r} of model '{structure.name}' moves with parameters "
+                                f"{sorted(free & set(self.model.parameter_names))}; the modal engine needs "
+                                "sensor points that depend on axis positions only"
+                            )
+                            raise ModelError(msg)
+            cached = (tuple(labels), rows)
+        self._sensor_cache[pos] = cached
+        return cached
+
+    # -- reference and tracking ---------------------------------------------------------------------
+    def reference(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        *,
+        previous: ModeReference | None = None,
+    ) -> ModeReference:
+        """Reference modes at one parameter vector (default nominal) and position.
+
+        With ``previous`` (the reference of a neighbouring position), the modes are ordered to follow it,
+        so that reference mode r is the same physical mode at every position.
+        """
+        p = self.model.vector(params)
+        if p.ndim != 1:
+            msg = "reference() takes a single parameter vector"
+            raise ModelError(msg)
+        mats = self.model.matrices(p, position, names=("M",))
+        chunk = self._solve(p[None, :], position, track=previous, exact=False, contributions=False, full=True)
+        return ModeReference(np.asarray(chunk.full_shapes)[0], mats["M"], chunk.frequency[0])
+
+    def references(
+        self, positions: Sequence[Mapping[str, float]], params: ParamsLike = None
+    ) -> list[ModeReference]:
+        """Reference modes at several positions, each tracked to the previous one."""
+        out: list[ModeReference] = []
+        for position in positions:
+            out.append(self.reference(params, position, previous=out[-1] if out else None))
+        return out
+
+    # -- evaluation -------------------------------------------------------------------------------
+    def evaluate(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        *,
+        track: ModeReference | bool = False,
+        exact: bool = False,
+        contributions: bool = False,
+        full_shapes: bool = False,
+        progress: bool = False,
+    ) -> ModalBatch:
+        """Modes for one parameter vector or a batch (B, n_params) at one axis position.
+
+        Parameters
+        ----------
+        params : array (n_params,) or (B, n_params), mapping or None
+            Parameter vectors in ``model.parameter_names`` order (a mapping overrides the nominal values).
+        position : mapping or None
+            Axis position (default: each axis at its first position).
+        track : ModeReference or bool
+            Report, for each reference mode, the most similar mode (mass-weighted MAC, optimal assignment).
+            ``True`` tracks against the nominal modes at this position.
+        exact : bool
+            Also compute the exact complex poles and shapes (viscous, hysteretic and gyroscopic terms).
+        contributions : bool
+            Also return the damping contribution of each source and ``d zeta / d p``.
+        full_shapes : bool
+            Also return the shapes at all DOFs.
+        progress : bool
+            Progress bar.
+        """
+        p = self.model.vector(params)
+        pb = p if p.ndim == 2 else p[None, :]
+        reference = self.reference(None, position) if track is True else (track or None)
+        chunks = map_chunks(
+            lambda s: self._solve(pb[s], position, track=reference, exact=exact, contributions=contributions,
+                                  full=full_shapes, offset=s.start),
+            pb.shape[0],
+            chunk_size=self.chunk_size,
+            n_workers=self.n_workers,
+            progress=progress,
+            description="modes",
+        )
+        return self._combine(chunks, pb, position)
+
+    def map(
+        self,
+        func: Callable[[ModalBatch], T],
+        params: ParamsLike,
+        position: Mapping[str, float] | None = None,
+        *,
+        track: ModeReference | bool = False,
+        exact: bool = False,
+        contributions: bool = False,
+        progress: bool = False,
+    ) -> list[T]:
+        """Apply ``func`` to the modes of each chunk and return its results in order (memory stays bounded)."""
+        p = self.model.vector(params)
+        pb = p if p.ndim == 2 else p[None, :]
+        reference = self.reference(None, position) if track is True else (track or None)
+
+        def run(s: slice) -> T:
+            chunk = self._solve(pb[s], position, track=reference, exact=exact, contributions=contributions,
+                                full=False, offset=s.start)
+            return func(self._combine([chunk], pb[s], position))
+
+        return map_chunks(run, pb.shape[0], chunk_size=self.chunk_size, n_workers=self.n_workers,
+                          progress=progress, description="modes")
+
+    def _combine(self, chunks: list[_Chunk], pb: Array, position: Mapping[str, float] | None) -> ModalBatch:
+        sensors = self._sensor_rows(position)[0]
+        sources = self.model.damping_sources(pb[:1], position)
+
+        def cat(name: str) -> Any:
+            values = [getattr(c, name) for c in chunks]
+            return None if values[0] is None else np.concatenate(values, axis=0)
+
+        return ModalBatch(
+            frequency=cat("frequency"),
+            damping=cat("damping"),
+            shapes=cat("shapes"),
+            sensors=sensors,
+            position=dict(zip(self.model.axis_names, self.model.position_vector(position), strict=True)),
+            parameters=pb,
+            parameter_names=tuple(self.model.parameter_names),
+            mode_index=cat("mode_index"),
+            tracking_mac=cat("tracking_mac"),
+            contributions=cat("contributions"),
+            damping_gradient=cat("damping_gradient"),
+            source_names=sources.names,
+            source_elements=sources.elements,
+            poles=cat("poles"),
+            complex_shapes=cat("complex_shapes"),
+            full_shapes=cat("full_shapes"),
+            dofs=self.model.dofs,
+        )
+
+    # -- the hot path -----------------------------------------------------------------------------
+    def _solve(
+        self,
+        pb: Array,
+        position: Mapping[str, float] | None,
+        *,
+        track: ModeReference | None,
+        exact: bool,
+        contributions: bool,
+        full: bool,
+        offset: int = 0,
+    ) -> _Chunk:
+        model = self.model
+        n = model.n_dof
+        names = ("M", "K", "C", "G", "H") if exact else ("M", "K")
+        mats = model.matrices(pb, position, names=names)
+        linv = _inverse_cholesky(mats["M"], offset)
+        linv_t = np.ascontiguousarray(np.swapaxes(linv, 1, 2))
+        reduced = linv @ mats["K"] @ linv_t
+        lam, vec = np.linalg.eigh(reduced)
+        scale = np.max(np.abs(lam), axis=1, keepdims=True)
+        lam = np.where(np.abs(lam) < RIGID_TOLERANCE * np.maximum(scale, 1e-300), 0.0, lam)
+        bad = np.flatnonzero(lam.min(axis=1) < 0)
+        if bad.size:
+            msg = (
+                f"stiffness matrix is not positive semi-definite for samples {_first(bad + offset)} "
+                f"(min eigenvalue {lam[bad[0]].min():.3g}) in model '{model.structure.name}'"
+            )
+            raise ModelError(msg)
+        m_out = track.n_modes if track is not None else self.n_modes
+        n_cand = min(n, m_out + TRACKING_MARGIN) if track is not None else m_out
+        phi = linv_t @ np.ascontiguousarray(vec[:, :, :n_cand])  # (B, n, n_cand) mass-normalized
+        lam = lam[:, :n_cand]
+        b = pb.shape[0]
+        if track is not None:
+            index, mac = _track(track, phi)
+            rows = np.arange(b)[:, None]
+            phi = phi[rows[:, :, None], np.arange(n)[None, :, None], index[:, None, :]]
+            lam = lam[rows, index]
+        else:
+            index = np.broadcast_to(np.arange(m_out), (b, m_out)).copy()
+            mac = None
+        omega = np.sqrt(lam)
+        sources = model.damping_sources(pb, position)
+        zeta, contrib, gradient = _first_order_damping(sources, phi, omega, contributions)
+        sensor_rows = self._sensor_rows(position)[1]
+        shapes = sensor_rows @ phi
+        poles = cshapes = None
+        if exact:
+            poles, psi = _exact_modes(mats, linv, linv_t, phi, omega)
+            cshapes = sensor_rows @ psi
+        return _Chunk(omega / (2 * np.pi), zeta, shapes, index, mac, contrib, gradient, poles, cshapes,
+                      phi if full else None)
+
+
+def modal_batch(
+    model: NumericModel | Structure,
+    params: ParamsLike = None,
+    position: Mapping[str, float] | None = None,
+    *,
+    sensors: Sequence[str] | str | None = None,
+    n_modes: int | None = None,
+    exact: bool = False,
+    contributions: bool = False,
+    track: ModeReference | bool = False,
+) -> ModalBatch:
+    """Modes of ``model`` for a batch of parameter vectors (function form of :meth:`ModalEngine.evaluate`).
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> batch = modal_batch(load_model("builtin:two-mass-rig"), exact=True)
+    >>> (batch.damping.round(4), (-batch.poles.real / abs(batch.poles)).round(4))
+    (array([[0.0005, 0.0045]]), array([[0.0005, 0.0045]]))
+    """
+    engine = ModalEngine(model, sensors=sensors, n_modes=n_modes)
+    return engine.evaluate(params, position, exact=exact, contributions=contributions, track=track)
+
+
+# -- numerical kernels ------------------------------------------------------------------------------
+def _first(indices: NDArray[np.intp], k: int = 5) -> str:
+    shown = ", ".join(str(int(i)) for i in indices[:k])
+    return f"[{shown}{', ...' if indices.size > k else ''}] ({indices.size} in all)"
+
+
+def _inverse_cholesky(mass: Array, offset: int) -> Array:
+    """``L^-1`` with ``M = L L^T`` for a stack of mass matrices; names the samples where M is not PD."""
+    try:
+        chol = np.linalg.cholesky(mass)
+    except np.linalg.LinAlgError as exc:
+        bad = [i for i in range(mass.shape[0]) if not _is_positive_definite(mass[i])]
+        msg = (
+            f"mass matrix is not positive definite for samples {_first(np.array(bad, dtype=np.intp) + offset)} "
+            "(non-physical masses or inertias)"
+        )
+        raise ModelError(msg) from exc
+    return np.linalg.inv(chol)
+
+
+def _is_positive_definite(mat: Array) -> bool:
+    try:
+        np.linalg.cholesky(mat)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def _first_order_damping(
+    sources: DampingSources, phi: Array, omega: Array, contributions: bool
+) -> tuple[Array, Array | None, Array | None]:
+    """zeta = sum_j coef_j (h_j phi)^2 / (2 omega^k), k = 1 viscous, 2 hysteretic; rigid modes get 0."""
+    b, _, m = phi.shape
+    if not sources.names:
+        zeros = np.zeros((b, m))
+        return zeros, (np.zeros((b, m, 0)) if contributions else None), (
+            np.zeros((b, m, sources.jacobian.shape[2])) if contributions else None)
+    elong = sources.rows @ phi  # (B, n_src, m): modal elongation of each source
+    rigid = omega == 0
+    safe = np.where(rigid, 1.0, omega)
+    power = np.where(sources.hysteretic, 2.0, 1.0)  # (n_src,)
+    unit = elong**2 / (2 * safe[:, None, :] ** power[None, :, None])  # (B, n_src, m)
+    unit = np.where(rigid[:, None, :], 0.0, unit)
+    contrib = unit * sources.coefficients[:, :, None]
+    zeta = contrib.sum(axis=1)
+    if not contributions:
+        return zeta, None, None
+    gradient = np.swapaxes(unit, 1, 2) @ sources.jacobian  # (B, m, n_params)
+    return zeta, np.ascontiguousarray(np.swapaxes(contrib, 1, 2)), gradient
+
+
+def _track(reference: ModeReference, phi: Array) -> tuple[NDArray[np.intp], Array]:
+    """Index of the candidate mode matching each reference mode, and its mass-weighted MAC."""
+    weighted = reference.shapes.T @ reference.mass  # (m_ref, n)
+    cross = weighted @ phi  # (B, m_ref, n_cand)
+    norm_ref = np.einsum("ir,ir->r", reference.shapes, reference.mass @ reference.shapes)
+    norm = np.einsum("bir,bir->br", phi, reference.mass @ phi)
+    mac = cross**2 / (norm_ref[None, :, None] * norm[:, None, :])
+    best = np.argmax(mac, axis=2)
+    index = best.copy()
+    for b in range(phi.shape[0]):
+        if np.unique(best[b]).size != best.shape[1]:  # two reference modes claim one mode: assign optimally
+            rows, cols = linear_sum_assignment(mac[b], maximize=True)
+            index[b, rows] = cols
+    chosen = np.take_along_axis(mac, index[:, :, None], axis=2)[:, :, 0]
+    return index.astype(np.intp), chosen
+
+
+def _exact_modes(
+    mats: dict[str, Array], linv: Array, linv_t: Array, phi: Array, omega: Array
+) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
+    """Complex poles and displacement shapes of the full damped system, paired with the real modes.
+
+    Pairing is by the mass-weighted similarity ``|phi^T M psi|^2 / psi^H M psi`` (optimal assignment);
+    rigid-body modes keep pole 0 and their real shape; a real mode without an oscillatory partner (similarity
+    below 0.5: overdamped) gets NaN.
+    """
+    b, n, m = phi.shape
+    minv = linv_t @ linv
+    stiff = mats["K"] + 1j * mats["H"] if np.any(mats["H"]) else mats["K"]
+    state = np.zeros((b, 2 * n, 2 * n), dtype=stiff.dtype)
+    state[:, :n, n:] = np.eye(n)
+    state[:, n:, :n] = -(minv @ stiff)
+    state[:, n:, n:] = -(minv @ (mats["C"] + mats["G"]))
+    lam, vec = np.linalg.eig(state)
+    poles = np.full((b, m), np.nan + 1j * np.nan)
+    shapes = np.full((b, n, m), np.nan + 1j * np.nan)
+    mphi = mats["M"] @ phi  # (B, n, m)
+    for k in range(b):
+        upper = np.flatnonzero(lam[k].imag > 1e-9 * max(float(np.abs(lam[k]).max()), 1.0))
+        psi = vec[k, :n, upper]  # (n_up, n)
+        if upper.size == 0:
+            continue
+        overlap = np.abs(mphi[k].T @ psi.T)  # (m, n_up)
+        norms = np.sqrt(np.einsum("ij,ij->j", np.conj(psi.T), mats["M"][k] @ psi.T).real)
+        sim = overlap / np.where(norms > 0, norms, 1.0)
+        rows, cols = linear_sum_assignment(sim, maximize=True)
+        for r, c in zip(rows, cols, strict=True):
+            if sim[r, c] ** 2 < 0.5 or omega[k, r] == 0:
+                continue
+            vector = psi[c]
+            poles[k, r] = lam[k, upper[c]]
+            shapes[k, :, r] = vector / (mphi[k, :, r] @ vector)
+    rigid = omega == 0
+    poles[rigid] = 0.0
+    shapes = np.where(rigid[:, None, :], phi.astype(complex), shapes)
+    return poles, shapes
