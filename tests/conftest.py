@@ -15,3 +15,47 @@ def two_mass():
 @pytest.fixture(scope="session")
 def spindle():
     return load_model("builtin:spindle-bearing")
+
+
+def build_slide():
+    """A base on mounts with a slide moving along axis z on two guide shoes (CASE 3), both damping kinds.
+
+    The guide stiffness follows a preload law ``kg0 * (Fp / 1000)**(1/3)`` so that one coefficient is
+    non-linear in a parameter; sensors sit on the base and on the slide.
+    """
+    from cappe.model import StructureBuilder
+
+    b = StructureBuilder("slide")
+    b.parameter("mb", 40.0, unit="kg", kind="mass")
+    b.parameter("ms", 12.0, unit="kg", kind="mass")
+    b.parameter("Jb", 0.9, unit="kg m^2", kind="inertia")
+    b.parameter("Js", 0.2, unit="kg m^2", kind="inertia")
+    b.parameter("km", 8.0e6, unit="N/m", kind="stiffness")
+    b.parameter("kmr", 4.0e5, unit="N m/rad", kind="stiffness")
+    b.parameter("kg0", 3.0e7, unit="N/m", kind="stiffness")
+    b.parameter("Fp", 1500.0, unit="N", kind="other")
+    b.parameter("cm", 900.0, unit="N s/m", kind="damping")
+    b.parameter("cg", 300.0, unit="N s/m", kind="damping")
+    b.parameter("eta", 0.03, unit="1", kind="loss")
+    b.axis("z", [0.1, 0.25, 0.4])
+    b.body("base", mass="mb", inertia={"xx": "Jb", "yy": "1.2*Jb", "zz": "0.7*Jb"})
+    b.body("slide", mass="ms", inertia={"xx": "Js", "yy": "1.1*Js", "zz": "0.8*Js"}, position=[0, 0.05, "z"])
+    mount = {d: "km" if d in ("x", "y", "z") else "kmr" for d in ("x", "y", "z", "rx", "ry", "rz")}
+    for i, (x, y) in enumerate(((-0.3, -0.2), (0.3, -0.2), (0.0, 0.25))):
+        b.element(f"mount{i}", bodies=("ground", "base"), at=[x, y, -0.1], stiffness=mount,
+                  damping={"x": "cm", "y": "cm", "z": "cm"}, loss={"rx": "eta"})
+    guide = {"x": "kg0*(Fp/1000)**(1/3)", "y": "0.8*kg0*(Fp/1000)**(1/3)"}
+    for i, dz in enumerate((-0.06, 0.06)):
+        b.element(f"shoe{i}", bodies=("base", "slide"), at=[0.02, 0.05, f"z + {dz}"], stiffness=guide,
+                  damping={"x": "cg"}, loss={"y": "eta"})
+    b.element("drive", bodies=("base", "slide"), at=[0, 0.05, "z"], stiffness={"z": "kg0/10", "rz": "kmr"}, damping={"z": "cg"})
+    b.sensor("tool", body="slide", point=[0, 0.1, 0.0])
+    b.sensor("top", body="base", point=[0.2, 0.2, 0.1])
+    b.input("F", body="slide", direction="x")
+    b.output("d", body="slide", direction="x")
+    return b.build()
+
+
+@pytest.fixture(scope="session")
+def slide():
+    return build_slide()

@@ -194,6 +194,21 @@ class ModalEngine:
         return out
 
     # -- evaluation -------------------------------------------------------------------------------
+    def derivatives(
+        self,
+        params: ParamsLike = None,
+        position: Mapping[str, float] | None = None,
+        *,
+        track: ModeReference | bool = False,
+    ) -> Any:
+        """Analytic derivatives of frequencies, damping ratios and sensor shapes at one parameter vector.
+
+        Returns a :class:`cappe.modal.ModalDerivatives`.
+        """
+        from cappe.modal._derivatives import derivatives
+
+        return derivatives(self, params, position, track=track)
+
     def evaluate(
         self,
         params: ParamsLike = None,

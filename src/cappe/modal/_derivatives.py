@@ -1,0 +1,196 @@
+"""Analytic derivatives of natural frequencies, mode shapes and first-order damping ratios.
+
+For ``K phi_r = lambda_r M phi_r`` with mass-normalized ``phi`` and distinct eigenvalues (Fox & Kapoor;
+the modal expansion is exact here because all n modes are known):
+
+* ``d lambda_r = phi_r^T (dK - lambda_r dM) phi_r``
+* ``d phi_r = sum_{s != r} phi_s^T (dK - lambda_r dM) phi_r / (lambda_r - lambda_s) phi_s
+  - 1/2 (phi_r^T dM phi_r) phi_r``
+* with ``zeta_r = c_r / (2 omega_r) + h_r / (2 omega_r^2)``, ``c_r = phi_r^T C phi_r``, ``h_r = phi_r^T H phi_r``:
+  ``d zeta_r = dc_r / (2 omega) - c_r d omega / (2 omega^2) + dh_r / (2 omega^2) - h_r d omega / omega^3``,
+  ``dc_r = phi_r^T dC phi_r + 2 phi_r^T C d phi_r`` (likewise ``dh_r``) and ``d omega = d lambda / (2 omega)``.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+import pandas as pd
+from numpy.typing import NDArray
+
+from cappe.exceptions import IllConditionedWarning, ModelError
+from cappe.modal._engine import ModalEngine, ModeReference, _track
+from cappe.model.numeric import NumericModel, ParamsLike
+from cappe.model.structure import Structure
+
+__all__ = ["ModalDerivatives", "modal_derivatives"]
+
+Array = NDArray[np.float64]
+#: Eigenvalues closer than this (relative to the largest) are treated as repeated.
+REPEATED_TOLERANCE = 1e-9
+
+
+@dataclass(frozen=True)
+class ModalDerivatives:
+    """Modes at one parameter vector and their partial derivatives with respect to every parameter.
+
+    Attributes
+    ----------
+    frequency : ndarray, shape (n_modes,)
+        Natural frequencies in Hz.
+    damping : ndarray, shape (n_modes,)
+        First-order damping ratios.
+    shapes : ndarray, shape (n_sensors, n_modes)
+        Mass-normalized real shapes at the sensors.
+    d_frequency : ndarray, shape (n_modes, n_params)
+        ``d f / d p`` in Hz per parameter unit.
+    d_damping : ndarray, shape (n_modes, n_params)
+        ``d zeta / d p`` per parameter unit.
+    d_shapes : ndarray, shape (n_sensors, n_modes, n_params)
+        Derivatives of the mass-normalized shapes at the sensors.
+    parameters : ndarray, shape (n_params,)
+    parameter_names, sensors : tuple of str
+    """
+
+    frequency: Array
+    damping: Array
+    shapes: Array
+    d_frequency: Array
+    d_damping: Array
+    d_shapes: Array
+    parameters: Array
+    parameter_names: tuple[str, ...]
+    sensors: tuple[str, ...]
+
+    def relative(self) -> tuple[Array, Array]:
+        """Thesis eq. 4.12, ``(1/Q) dQ/dp``, for frequencies and damping ratios: two (n_modes, n_params)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return self.d_frequency / self.frequency[:, None], self.d_damping / self.damping[:, None]
+
+    def normalized(self) -> tuple[Array, Array]:
+        """Dimensionless ``(p/Q) dQ/dp`` (per cent change per per cent) for frequencies and damping ratios."""
+        rel_f, rel_z = self.relative()
+        return rel_f * self.parameters[None, :], rel_z * self.parameters[None, :]
+
+    def to_dataframe(self) -> pd.DataFrame:
+        """Long table of normalized sensitivities: mode, parameter, frequency and damping sensitivity."""
+        nf, nz = self.normalized()
+        m, n_p = nf.shape
+        return pd.DataFrame({
+            "mode": np.repeat(np.arange(m), n_p),
+            "parameter": np.tile(np.array(self.parameter_names, dtype=object), m),
+            "frequency": np.repeat(self.frequency, n_p),
+            "frequency_sensitivity": nf.ravel(),
+            "damping_sensitivity": nz.ravel(),
+        })
+
+    def to_dict(self) -> dict[str, Any]:
+        nf, nz = self.normalized()
+        return {
+            "parameter_names": list(self.parameter_names),
+            "frequency": self.frequency.tolist(),
+            "damping": self.damping.tolist(),
+            "d_frequency": self.d_frequency.tolist(),
+            "d_damping": self.d_damping.tolist(),
+            "normalized_frequency_sensitivity": nf.tolist(),
+            "normalized_damping_sensitivity": nz.tolist(),
+        }
+
+
+def derivatives(
+    engine: ModalEngine,
+    params: ParamsLike = None,
+    position: Mapping[str, float] | None = None,
+    *,
+    track: ModeReference | bool = False,
+) -> ModalDerivatives:
+    """Modal derivatives at one parameter vector (see :meth:`ModalEngine.derivatives`)."""
+    model = engine.model
+    p = model.vector(params)
+    if p.ndim != 1:
+        msg = "modal derivatives take a single parameter vector"
+        raise ModelError(msg)
+    mats = model.matrices(p, position, names=("M", "K", "C", "H"))
+    dmats = model.matrix_derivatives(p, position, names=("M", "K", "C", "H"))
+    system = model.system(p, position)
+    lam, phi = system.undamped_modes()
+    n = model.n_dof
+    reference = engine.reference(None, position) if track is True else (track or None)
+    if reference is not None:
+        index = _track(reference, phi[None, :, :])[0][0]
+    else:
+        index = np.arange(engine.n_modes)
+    scale = max(float(np.abs(lam).max()), 1e-300)
+    lam_r = lam[index]
+    cols = np.arange(index.size)
+    denom = lam_r[None, :] - lam[:, None]  # (n, m): lambda_r - lambda_s
+    own = np.arange(n)[:, None] == index[None, :]
+    repeated = (np.abs(denom) <= REPEATED_TOLERANCE * scale) & ~own
+    if np.any(repeated & (lam_r[None, :] > 0)):
+        pairs = [(int(index[r]), int(s)) for s, r in zip(*np.nonzero(repeated & (lam_r[None, :] > 0)), strict=True)]
+        warnings.warn(
+            f"modes {pairs[:3]} of model '{model.structure.name}' have (nearly) equal frequencies; their shape "
+            "derivatives are not unique (computed without the coupling between them)",
+            IllConditionedWarning,
+            stacklevel=3,
+        )
+    # modal projections of the derivative matrices, (n_p, n, m): phi_s^T dX phi_r
+    dk = np.einsum("is,pij,jr->psr", phi, dmats["K"], phi[:, index], optimize=True)
+    dm = np.einsum("is,pij,jr->psr", phi, dmats["M"], phi[:, index], optimize=True)
+    coupling = dk - lam_r[None, None, :] * dm
+    d_lam = coupling[:, index, cols]  # (n_p, m)
+    mask = own | repeated
+    factor = np.where(mask[None], 0.0, coupling / np.where(mask, 1.0, denom)[None])
+    factor[:, index, cols] = -0.5 * dm[:, index, cols]
+    d_phi = np.einsum("is,psr->pir", phi, factor)  # (n_p, n, m)
+    omega = np.sqrt(lam_r)
+    rigid = omega == 0
+    safe = np.where(rigid, 1.0, omega)
+    d_omega = np.where(rigid, 0.0, d_lam / (2 * safe))
+    phi_r = phi[:, index]
+    c_r = np.einsum("ir,ij,jr->r", phi_r, mats["C"], phi_r)
+    h_r = np.einsum("ir,ij,jr->r", phi_r, mats["H"], phi_r)
+    dc = np.einsum("ir,pij,jr->pr", phi_r, dmats["C"], phi_r) + 2 * np.einsum(
+        "ir,ij,pjr->pr", phi_r, mats["C"], d_phi)
+    dh = np.einsum("ir,pij,jr->pr", phi_r, dmats["H"], phi_r) + 2 * np.einsum(
+        "ir,ij,pjr->pr", phi_r, mats["H"], d_phi)
+    zeta = np.where(rigid, 0.0, c_r / (2 * safe) + h_r / (2 * safe**2))
+    d_zeta = dc / (2 * safe) - c_r * d_omega / (2 * safe**2) + dh / (2 * safe**2) - h_r * d_omega / safe**3
+    d_zeta = np.where(rigid, 0.0, d_zeta)
+    labels, rows = engine._sensor_rows(position)
+    return ModalDerivatives(
+        frequency=omega / (2 * np.pi),
+        damping=zeta,
+        shapes=rows @ phi_r,
+        d_frequency=(d_omega / (2 * np.pi)).T,
+        d_damping=d_zeta.T,
+        d_shapes=np.einsum("si,pir->srp", rows, d_phi),
+        parameters=p,
+        parameter_names=tuple(model.parameter_names),
+        sensors=labels,
+    )
+
+
+def modal_derivatives(
+    model: NumericModel | Structure,
+    params: ParamsLike = None,
+    position: Mapping[str, float] | None = None,
+    *,
+    sensors: Sequence[str] | str | None = None,
+    n_modes: int | None = None,
+) -> ModalDerivatives:
+    """Analytic derivatives of frequencies, damping ratios and shapes (function form).
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> d = modal_derivatives(load_model("builtin:two-mass-rig"))
+    >>> freq_sens, _ = d.normalized()
+    >>> freq_sens[:, d.parameter_names.index("m1")].round(3)   # f ~ m^-1/2 for the mass-1 mode
+    array([-0.008, -0.492])
+    """
+    return derivatives(ModalEngine(model, sensors=sensors, n_modes=n_modes), params, position)

@@ -1,0 +1,203 @@
+"""Batched modal engine against the per-sample reference (MechanicalSystem), determinism, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from cappe.exceptions import ModelError
+from cappe.modal import ModalEngine, modal_batch
+from cappe.model import NumericModel, StructureBuilder
+
+
+def random_params(model: NumericModel, n: int, seed: int, spread: float = 0.3) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    return model.nominal * rng.uniform(1 - spread, 1 + spread, size=(n, model.nominal.size))
+
+
+def align_signs(shapes: np.ndarray, reference: np.ndarray) -> np.ndarray:
+    """Flip each column of ``shapes`` (n, m) to point the same way as ``reference``."""
+    sign = np.sign(np.sum(shapes * reference, axis=0))
+    return shapes * np.where(sign == 0, 1.0, sign)
+
+
+@pytest.mark.parametrize("fixture", ["spindle", "slide"])
+def test_batch_matches_per_sample_first_order_modes(fixture, request):
+    structure = request.getfixturevalue(fixture)
+    model = NumericModel(structure)
+    engine = ModalEngine(model, sensors="dofs", n_workers=1)
+    params = random_params(model, 6, seed=1)
+    position = {"z": 0.25} if model.axis_names else None
+    batch = engine.evaluate(params, position)
+    for b, p in enumerate(params):
+        ref = model.system(p, position).modes("first-order")
+        # both solve the same symmetric-definite problem in double precision: agreement to round-off
+        np.testing.assert_allclose(batch.frequency[b], ref.frequency, rtol=1e-10)
+        np.testing.assert_allclose(batch.damping[b], ref.damping, rtol=1e-8, atol=1e-14)
+        np.testing.assert_allclose(align_signs(batch.shapes[b], ref.shapes), ref.shapes, atol=1e-8 * np.abs(ref.shapes).max())
+
+
+def test_exact_poles_match_the_state_space_eigenvalues(slide):
+    model = NumericModel(slide)
+    engine = ModalEngine(model, sensors="dofs")
+    params = random_params(model, 4, seed=2)
+    batch = engine.evaluate(params, {"z": 0.4}, exact=True)
+    for b, p in enumerate(params):
+        ref = model.system(p, {"z": 0.4}).modes("exact")
+        # the pairing may order near-equal modes differently; compare the sets of poles
+        np.testing.assert_allclose(np.sort_complex(batch.poles[b]), np.sort_complex(ref.poles), rtol=1e-9)
+        # complex shapes are scaled so that phi^T M psi = 1 with their real mode
+        mass = model.matrices(p, {"z": 0.4}, names=("M",))["M"]
+        phi = batch.full_shapes if batch.full_shapes is not None else None
+        assert phi is None
+        full = engine.evaluate(p, {"z": 0.4}, full_shapes=True).full_shapes[0]
+        np.testing.assert_allclose(np.einsum("ir,ij,jr->r", full, mass, batch.complex_shapes[b]), 1.0, rtol=1e-9)
+
+
+def test_light_damping_exact_and_first_order_agree(spindle):
+    """DESIGN 3: the first-order damping ratios approximate the exact ones for light damping."""
+    batch = modal_batch(spindle, exact=True)
+    exact_zeta = -batch.poles.real / np.abs(batch.poles)
+    # spindle damping ratios are 1-5 %; first-order error is O(zeta^2) relative, plus modal coupling
+    np.testing.assert_allclose(batch.damping, exact_zeta, rtol=0.1)
+    np.testing.assert_allclose(batch.frequency, np.abs(batch.poles) / (2 * np.pi), rtol=2e-3)
+
+
+def test_results_do_not_depend_on_batch_size_chunking_or_threads(slide):
+    model = NumericModel(slide)
+    params = random_params(model, 37, seed=3)
+    kwargs = {"exact": True, "contributions": True, "track": True}
+    position = {"z": 0.1}
+    one = ModalEngine(model, chunk_size=256, n_workers=1).evaluate(params, position, **kwargs)
+    many = ModalEngine(model, chunk_size=5, n_workers=2).evaluate(params, position, **kwargs)
+    single = [ModalEngine(model, chunk_size=1, n_workers=1).evaluate(p, position, **kwargs) for p in params[:7]]
+    for name in ("frequency", "damping", "shapes", "poles", "complex_shapes", "contributions", "damping_gradient",
+                 "mode_index", "tracking_mac"):
+        np.testing.assert_array_equal(getattr(one, name), getattr(many, name), err_msg=name)
+        np.testing.assert_array_equal(getattr(one, name)[:7], np.concatenate([getattr(s, name) for s in single]),
+                                      err_msg=name)
+
+
+def test_constant_and_varying_mass_give_identical_bits(spindle):
+    """A chunk whose samples share M takes the same arithmetic as one where M varies."""
+    model = NumericModel(spindle)
+    params = random_params(model, 8, seed=4)
+    mass_names = [p.name for p in spindle.parameters if p.kind in ("mass", "inertia")]
+    fixed = params.copy()
+    for name in mass_names:
+        fixed[:, model.parameter_names.index(name)] = model.nominal[model.parameter_names.index(name)]
+    mixed = np.vstack([fixed, params])
+    engine = ModalEngine(model, chunk_size=64, n_workers=1)
+    a = engine.evaluate(mixed)
+    b = ModalEngine(model, chunk_size=8, n_workers=1).evaluate(mixed)
+    np.testing.assert_array_equal(a.frequency, b.frequency)
+    np.testing.assert_array_equal(a.shapes, b.shapes)
+
+
+def test_damping_contributions_sum_and_reproduce_eq12(slide):
+    model = NumericModel(slide)
+    params = random_params(model, 5, seed=5)
+    batch = ModalEngine(model).evaluate(params, {"z": 0.25}, contributions=True)
+    np.testing.assert_allclose(batch.contributions.sum(axis=2), batch.damping, rtol=1e-12)
+    names, per_element = batch.element_contributions()
+    assert names == ("mount0", "mount1", "mount2", "shoe0", "shoe1", "drive")
+    np.testing.assert_allclose(per_element.sum(axis=2), batch.damping, rtol=1e-12)
+    # eq. 12/13: zeta = Q p over the damping parameters cm, cg and the loss factor eta (zeta is linear in each,
+    # with no other damping in the model), so Q @ p reproduces zeta exactly
+    idx = [model.parameter_names.index(n) for n in ("cm", "cg", "eta")]
+    q = batch.damping_gradient[:, :, idx]
+    np.testing.assert_allclose(np.einsum("bmp,bp->bm", q, params[:, idx]), batch.damping, rtol=1e-10)
+    # at fixed shapes only the parameters in the damping coefficients (c, eta * k) enter Q: masses and inertias
+    # do not, while the hysteretic coefficients eta * kmr and eta * kg also move with the stiffnesses
+    masses = [model.parameter_names.index(n) for n in ("mb", "ms", "Jb", "Js")]
+    assert np.all(batch.damping_gradient[:, :, masses] == 0)
+    assert np.all(batch.damping_gradient[:, :, [model.parameter_names.index(n) for n in ("kmr", "kg0", "Fp")]]
+                  .any(axis=(0, 1)))
+
+
+def test_damping_gradient_of_a_damping_parameter_is_the_exact_derivative(slide):
+    """zeta is linear in c at fixed mass and stiffness: a finite difference of any size is exact."""
+    model = NumericModel(slide)
+    p = model.nominal.copy()
+    i = model.parameter_names.index("cg")
+    engine = ModalEngine(model)
+    base = engine.evaluate(p, contributions=True)
+    p2 = p.copy()
+    p2[i] *= 3.0
+    moved = engine.evaluate(p2)
+    np.testing.assert_allclose((moved.damping - base.damping) / (p2[i] - p[i]), base.damping_gradient[:, :, i],
+                               rtol=1e-9, atol=1e-18)
+
+
+def test_tracking_follows_a_mode_through_a_frequency_crossing():
+    b = StructureBuilder("crossing")
+    b.parameter("kx", 1.0e6, kind="stiffness")
+    b.parameter("ky", 0.5e6, kind="stiffness")
+    b.parameter("kc", 1.0e3, kind="stiffness")
+    b.body("m", mass=1.0, inertia={"xx": 1, "yy": 1, "zz": 1}, dofs=["x", "y"])
+    b.element("sx", bodies=("ground", "m"), stiffness={"x": "kx"})
+    b.element("sy", bodies=("ground", "m"), stiffness={"y": "ky"})
+    b.element("diag", bodies=("ground", "m"), axes={"x": [1, 1, 0]}, stiffness={"x": "kc"})
+    model = NumericModel(b.build())
+    engine = ModalEngine(model, sensors="dofs")
+    ky = np.array([0.5e6, 0.9e6, 1.1e6, 2.0e6])
+    params = np.column_stack([np.full(4, 1.0e6), ky, np.full(4, 1.0e3)])
+    untracked = engine.evaluate(params)
+    tracked = engine.evaluate(params, track=True)
+    # untracked: mode 0 is the y mode below the crossing and the x mode above it
+    assert abs(untracked.shapes[0, 1, 0]) > abs(untracked.shapes[0, 0, 0])
+    assert abs(untracked.shapes[3, 0, 0]) > abs(untracked.shapes[3, 1, 0])
+    # tracked: mode 0 stays the y mode, its frequency follows sqrt(ky)
+    assert np.all(np.abs(tracked.shapes[:, 1, 0]) > np.abs(tracked.shapes[:, 0, 0]))
+    np.testing.assert_allclose(tracked.frequency[:, 0], np.sqrt(ky) / (2 * np.pi), rtol=1e-2)
+    np.testing.assert_array_equal(tracked.mode_index[:, 0], [0, 0, 1, 1])
+    assert np.all(tracked.tracking_mac > 0.99)
+
+
+def test_references_are_tracked_across_axis_positions(slide):
+    engine = ModalEngine(slide, n_modes=9)
+    positions = [{"z": z} for z in (0.1, 0.25, 0.4)]
+    refs = engine.references(positions)
+    assert [r.n_modes for r in refs] == [9, 9, 9]
+    # neighbouring references describe the same physical modes: high mass-weighted MAC on the diagonal
+    for a, b in zip(refs, refs[1:], strict=False):
+        cross = (a.shapes.T @ a.mass @ b.shapes) ** 2
+        assert np.all(np.diag(cross) > 0.5)
+        assert np.all(np.argmax(cross, axis=1) == np.arange(9))
+
+
+def test_map_streams_chunks(slide):
+    model = NumericModel(slide)
+    params = random_params(model, 20, seed=6)
+    engine = ModalEngine(model, chunk_size=6)
+    parts = engine.map(lambda batch: batch.frequency[:, 0], params, {"z": 0.1})
+    assert [p.shape for p in parts] == [(6,), (6,), (6,), (2,)]
+    np.testing.assert_array_equal(np.concatenate(parts), engine.evaluate(params, {"z": 0.1}).frequency[:, 0])
+
+
+def test_sensor_selection(slide):
+    engine = ModalEngine(slide, sensors=["tool:x", "top"])
+    assert engine.sensors == ("tool:x", "top:x", "top:y", "top:z")
+    batch = engine.evaluate()
+    full = ModalEngine(slide).evaluate()
+    np.testing.assert_array_equal(batch.shapes[0, 0], full.shapes[0, full.sensors.index("tool:x")])
+
+
+def test_errors_name_the_problem(slide):
+    model = NumericModel(slide)
+    with pytest.raises(ModelError, match=r"sensor 'nowhere' does not exist in model 'slide'"):
+        ModalEngine(model, sensors=["nowhere"])
+    with pytest.raises(ModelError, match=r"n_modes must be an integer from 1 to n_dof = 12; got 13"):
+        ModalEngine(model, n_modes=13)
+    with pytest.raises(ModelError, match=r"sensors must be a list of channel labels"):
+        ModalEngine(model, sensors="tool")
+    params = np.tile(model.nominal, (5, 1))
+    params[3, model.parameter_names.index("ms")] = -1.0
+    with pytest.raises(ModelError, match=r"mass matrix is not positive definite for samples \[3\] \(1 in all\)"):
+        ModalEngine(model, n_workers=1).evaluate(params)
+    params = np.tile(model.nominal, (5, 1))
+    params[[1, 4], model.parameter_names.index("km")] = -1.0e7
+    with pytest.raises(ModelError, match=r"stiffness matrix is not positive semi-definite for samples \[1, 4\]"):
+        ModalEngine(model, n_workers=1).evaluate(params)
+    with pytest.raises(ModelError, match=r"parameter array must have shape"):
+        ModalEngine(model).evaluate(np.ones((2, 3)))
