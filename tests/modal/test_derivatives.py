@@ -1,0 +1,116 @@
+"""Analytic modal derivatives against central finite differences and homogeneity identities."""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+
+from cappe.exceptions import IllConditionedWarning, ModelError
+from cappe.modal import ModalEngine, modal_derivatives
+from cappe.model import NumericModel, StructureBuilder
+
+
+def finite_differences(engine: ModalEngine, p: np.ndarray, position, step: float = 1e-6):
+    """Central differences of frequency, damping and sensor shapes (sign-aligned) for every parameter."""
+    base = engine.evaluate(p, position)
+    n_p = p.size
+    d_f = np.empty((base.n_modes, n_p))
+    d_z = np.empty((base.n_modes, n_p))
+    d_s = np.empty((*base.shapes.shape[1:], n_p))
+    for i in range(n_p):
+        h = step * max(abs(p[i]), 1e-12)
+        plus, minus = p.copy(), p.copy()
+        plus[i] += h
+        minus[i] -= h
+        bp, bm = engine.evaluate(plus, position), engine.evaluate(minus, position)
+        d_f[:, i] = (bp.frequency[0] - bm.frequency[0]) / (2 * h)
+        d_z[:, i] = (bp.damping[0] - bm.damping[0]) / (2 * h)
+        sp_, sm = bp.shapes[0], bm.shapes[0]
+        ref = base.shapes[0]
+        sp_ = sp_ * np.sign(np.sum(sp_ * ref, axis=0))
+        sm = sm * np.sign(np.sum(sm * ref, axis=0))
+        d_s[:, :, i] = (sp_ - sm) / (2 * h)
+    return base, d_f, d_z, d_s
+
+
+@pytest.mark.parametrize(("fixture", "position"), [("spindle", None), ("slide", {"z": 0.4})])
+def test_derivatives_match_finite_differences(fixture, position, request):
+    model = NumericModel(request.getfixturevalue(fixture))
+    engine = ModalEngine(model, n_workers=1)
+    p = model.nominal * np.random.default_rng(7).uniform(0.8, 1.2, model.nominal.size)
+    d = engine.derivatives(p, position)
+    base, d_f, d_z, d_s = finite_differences(engine, p, position)
+    np.testing.assert_allclose(d.frequency, base.frequency[0], rtol=1e-12)
+    np.testing.assert_allclose(d.damping, base.damping[0], rtol=1e-10)
+    # central differences with relative step 1e-6 have truncation ~1e-12 and round-off ~1e-10 relative to the
+    # largest term: compare scaled by p (per cent per per cent) against the largest sensitivity of each mode
+    scale_f = np.abs(d.d_frequency * p).max(axis=1, keepdims=True)
+    np.testing.assert_allclose(d.d_frequency * p, d_f * p, atol=1e-6 * scale_f.max())
+    scale_z = np.abs(d.d_damping * p).max()
+    np.testing.assert_allclose(d.d_damping * p, d_z * p, atol=1e-6 * scale_z)
+    scale_s = np.abs(d.d_shapes * p).max()
+    np.testing.assert_allclose(d.d_shapes * p, d_s * p, atol=1e-5 * scale_s)
+
+
+def test_euler_homogeneity_of_frequencies_and_damping(slide):
+    """f is homogeneous of degree -1/2 in all masses and +1/2 in all stiffnesses; zeta of degree +1 in all
+    damping coefficients (c and eta); in the masses its viscous part has degree -1/2 and its hysteretic part
+    degree 0 (phi^T H phi and omega^2 both scale with 1/mass). Euler: sum_i p_i dQ/dp_i = degree * Q."""
+    model = NumericModel(slide)
+    d = modal_derivatives(slide, position={"z": 0.25})
+    kinds = {p.name: p.kind for p in slide.parameters}
+    names = model.parameter_names
+    mass = np.array([kinds[n] in ("mass", "inertia") for n in names])
+    # kg0 and km, kmr scale every stiffness; Fp enters only through kg0*(Fp/1000)^(1/3), so it is left out
+    stiff = np.array([n in ("km", "kmr", "kg0") for n in names])
+    damp = np.array([n in ("cm", "cg", "eta") for n in names])
+    p = d.parameters
+    # analytic derivatives are exact to round-off: 1e-9 relative
+    np.testing.assert_allclose((d.d_frequency[:, mass] * p[mass]).sum(axis=1), -0.5 * d.frequency, rtol=1e-9)
+    np.testing.assert_allclose((d.d_frequency[:, stiff] * p[stiff]).sum(axis=1), 0.5 * d.frequency, rtol=1e-9)
+    np.testing.assert_allclose((d.d_damping[:, damp] * p[damp]).sum(axis=1), d.damping, rtol=1e-9)
+    batch = ModalEngine(slide).evaluate(position={"z": 0.25}, contributions=True)
+    viscous = batch.contributions[0][:, [k == "viscous" for k in model.damping_sources().kinds]].sum(axis=1)
+    np.testing.assert_allclose((d.d_damping[:, mass] * p[mass]).sum(axis=1), -0.5 * viscous, rtol=1e-9)
+
+
+def test_two_mass_rig_table_5_3_signs(two_mass):
+    """Thesis Table 5.3: +10 % m1 lowers f and zeta of the mass-1 mode; k11 raises f and lowers zeta."""
+    d = modal_derivatives(two_mass)
+    nf, nz = d.normalized()
+    names = d.parameter_names
+    mode1 = int(np.argmax(np.abs(d.shapes[0])))  # the mode where mass 1 (channel d1) moves most
+    assert nf[mode1, names.index("m1")] < -0.4
+    assert nz[mode1, names.index("m1")] < -0.4
+    assert nf[mode1, names.index("k11")] > 0.4
+    assert nz[mode1, names.index("k11")] < -0.4
+    # zeta is proportional to c: normalized sensitivity of the mode's damping to its own damper is close to 1
+    assert 0.9 < nz[mode1, names.index("c11")] <= 1.0 + 1e-12
+
+
+def test_repeated_frequencies_warn():
+    b = StructureBuilder("symmetric")
+    b.parameter("k", 1.0e6, kind="stiffness")
+    b.body("m", mass=1.0, inertia={"xx": 1, "yy": 1, "zz": 1}, dofs=["x", "y"])
+    b.element("s", bodies=("ground", "m"), stiffness={"x": "k", "y": "k"})
+    with pytest.warns(IllConditionedWarning, match=r"have \(nearly\) equal frequencies"):
+        d = modal_derivatives(b.build())
+    # eigenvalue derivatives stay defined: both modes scale with sqrt(k)
+    np.testing.assert_allclose(d.d_frequency[:, 0] * 1.0e6, 0.5 * d.frequency, rtol=1e-12)
+
+
+def test_tracked_derivatives_follow_the_reference_order(slide):
+    engine = ModalEngine(slide, n_modes=6)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        d = engine.derivatives(position={"z": 0.1}, track=True)
+    plain = engine.derivatives(position={"z": 0.1})
+    np.testing.assert_allclose(d.frequency, plain.frequency, rtol=1e-12)
+
+
+def test_derivatives_take_one_vector(slide):
+    engine = ModalEngine(slide)
+    with pytest.raises(ModelError, match="modal derivatives take a single parameter vector"):
+        engine.derivatives(np.tile(engine.model.nominal, (2, 1)))
