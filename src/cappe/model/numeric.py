@@ -218,6 +218,7 @@ class NumericModel:
         if self._source_jac_entries:
             for (j, i), v in zip(self._source_jac_entries, self._source_jac(*args), strict=True):
                 jac[:, j, i] = v
+        rows: Array
         if self._source_rows_per_sample:
             rows = np.empty((n_b, n_s, n))
             for b in range(n_b):
