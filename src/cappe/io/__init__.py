@@ -1,5 +1,23 @@
-"""File contracts: JSON parameter files and atomic writes."""
+"""File contracts: JSON parameter files, modal data (cappe.modal/1) and atomic writes."""
 
 from cappe.io.files import read_parameters, write_json, write_text
+from cappe.io.modal import (
+    MODAL_FORMAT,
+    ModalData,
+    ModalDataSet,
+    modal_data_from_mapping,
+    read_modal_data,
+    write_modal_data,
+)
 
-__all__ = ["read_parameters", "write_json", "write_text"]
+__all__ = [
+    "MODAL_FORMAT",
+    "ModalData",
+    "ModalDataSet",
+    "modal_data_from_mapping",
+    "read_modal_data",
+    "read_parameters",
+    "write_json",
+    "write_modal_data",
+    "write_text",
+]

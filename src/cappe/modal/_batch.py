@@ -9,6 +9,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
+from cappe.io.modal import ModalDataSet
 from cappe.systems.modal import ModalSet
 
 __all__ = ["ModalBatch"]
@@ -118,6 +119,21 @@ class ModalBatch:
                             self.frequency[sample] == 0)
         return ModalSet(self.frequency[sample], self.damping[sample], self.shapes[sample],
                         self.first_order_poles[sample], self.sensors, "first-order", self.frequency[sample] == 0)
+
+    def data_set(self, sample: int = 0) -> ModalDataSet:
+        """One sample's modes as a :class:`cappe.io.ModalDataSet` (exact modes when computed).
+
+        Modes without an exact oscillatory counterpart (rigid-body or overdamped) are left out.
+        """
+        if self.poles is not None and self.complex_shapes is not None:
+            poles = self.poles[sample]
+            keep = np.isfinite(poles) & (np.abs(poles) > 0)
+            w = np.abs(poles[keep])
+            return ModalDataSet(dict(self.position), w / (2 * np.pi), -poles[keep].real / w,
+                                self.complex_shapes[sample][:, keep])
+        keep = self.frequency[sample] > 0
+        return ModalDataSet(dict(self.position), self.frequency[sample][keep], self.damping[sample][keep],
+                            self.shapes[sample][:, keep].astype(complex))
 
     def to_dataframe(self) -> pd.DataFrame:
         """Long table: one row per sample and mode with frequency, damping and (if computed) exact pole."""

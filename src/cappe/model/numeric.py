@@ -15,6 +15,7 @@ from typing import Any, cast
 
 import numpy as np
 import scipy.sparse as sps
+from scipy.sparse.csgraph import connected_components
 import sympy as sp
 from numpy.typing import NDArray
 
@@ -299,6 +300,27 @@ class NumericModel:
                 cached[name] = (nz, sps.csr_array(dense[:, nz].T))
             self._sparse_cache[pos] = cached
         return cached
+
+    def blocks(self, name: str, position: Mapping[str, float] | None = None) -> list[NDArray[np.intp]]:
+        """DOF index sets of the independent diagonal blocks of matrix ``name`` (connected components of its
+        structural non-zeros); one block of all DOFs if the matrix has parameter-dependent patterns.
+
+        The mass matrix of a rigid-body model is block-diagonal by body, so its Cholesky factor and inverse
+        can be computed on the small blocks.
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> NumericModel(load_model("builtin:two-mass-rig")).blocks("M")
+        [array([0]), array([1])]
+        """
+        n = self.n_dof
+        if name in self._residual_funcs:
+            return [np.arange(n)]
+        nz = self._sparse_patterns(self.position_vector(position))[name][0]
+        graph = sps.coo_array((np.ones(nz.size), (nz // n, nz % n)), shape=(n, n))
+        count, labels = connected_components(graph, directed=False)
+        return [np.flatnonzero(labels == k) for k in range(count)]
 
     def coefficients(self, params: ParamsLike = None, position: Mapping[str, float] | None = None) -> Array:
         """Affine coefficients ``f_j(p, r)`` of all matrix terms: (n_coef,) or (B, n_coef)."""

@@ -1,0 +1,99 @@
+"""Modal engine throughput as a fraction of the LAPACK bound, thread scaling, and against a naive loop.
+
+For chains of 6-DOF rigid bodies (n_dof 12 to 150) and several batch sizes, in one run:
+
+* ``engine_1``: ModalEngine.evaluate with one worker (frequencies, first-order damping, sensor shapes);
+* ``engine_2``: the same with two worker threads;
+* ``bound``: numpy's batched ``eigh`` alone on the reduced symmetric matrices of the same problems, BLAS
+  pinned to one thread (the cost of the eigen-solves, which no modal engine can beat);
+* ``loop``: the naive route, one MechanicalSystem per sample and scipy's generalized ``eigh`` (timed on a
+  subset and scaled).
+
+Reported: ``fraction_of_bound = t_bound / t_engine_1`` (target >= 0.7 for n_dof >= 30), ``thread_speedup
+= t_engine_1 / t_engine_2`` (target >= 1.8 on 2 cores) and ``speedup_vs_loop``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+
+import numpy as np
+
+from benchmarks.bench_matrices import chain
+from cappe.modal import ModalEngine
+from cappe.parallel import single_threaded_blas
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def _best(func: Callable[[], object], repeat: int = 5) -> float:
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def main() -> None:
+    rng = np.random.default_rng(0)
+    rows = []
+    for n_bodies, batches in ((2, (256, 2048)), (5, (256, 1024)), (10, (128, 512)), (25, (64, 256))):
+        model = chain(n_bodies)
+        for batch in batches:
+            params = model.nominal * rng.uniform(0.7, 1.3, size=(batch, model.nominal.size))
+            chunk = max(1, min(256, batch // 8))
+            one = ModalEngine(model, n_workers=1, chunk_size=chunk)
+            two = ModalEngine(model, n_workers=2, chunk_size=chunk)
+            one.evaluate(params[:2])  # compile caches
+            t_one = _best(lambda: one.evaluate(params))  # noqa: B023 (called inside the iteration)
+            t_two = _best(lambda: two.evaluate(params))  # noqa: B023
+            mats = model.matrices(params, names=("M", "K"))
+            linv = np.linalg.inv(np.linalg.cholesky(mats["M"]))
+            reduced = linv @ mats["K"] @ np.swapaxes(linv, 1, 2)
+            with single_threaded_blas():
+                t_bound = _best(lambda: np.linalg.eigh(reduced))  # noqa: B023
+                n_loop = min(batch, 64)
+                t_loop = _best(
+                    lambda: [model.system(p).modes("first-order") for p in params[:n_loop]],  # noqa: B023
+                    repeat=2,
+                ) * batch / n_loop
+            row = {
+                "n_dof": model.n_dof,
+                "batch": batch,
+                "chunk_size": chunk,
+                "engine_1_s": t_one,
+                "engine_2_s": t_two,
+                "bound_s": t_bound,
+                "loop_s": t_loop,
+                "evaluations_per_s_1": batch / t_one,
+                "evaluations_per_s_2": batch / t_two,
+                "fraction_of_bound": t_bound / t_one,
+                "thread_speedup": t_one / t_two,
+                "speedup_vs_loop": t_loop / t_one,
+            }
+            rows.append(row)
+            print(
+                f"n_dof {model.n_dof:4d} batch {batch:5d}: {row['evaluations_per_s_1']:9.0f}/s (1 thread) "
+                f"{row['evaluations_per_s_2']:9.0f}/s (2 threads, {row['thread_speedup']:4.2f}x); "
+                f"{row['fraction_of_bound']:4.2f} of the eigh bound; {row['speedup_vs_loop']:5.1f}x the loop"
+            )
+    RESULTS.mkdir(exist_ok=True)
+    out = {
+        "benchmark": "modal",
+        "machine": platform.processor() or platform.machine(),
+        "cores": len(os.sched_getaffinity(0)),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "rows": rows,
+    }
+    (RESULTS / "modal.json").write_text(json.dumps(out, indent=2) + "\n")
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,185 @@
+"""Modal data files (``"format": "cappe.modal/1"``): reference or measured modes at axis positions.
+
+::
+
+    {"format": "cappe.modal/1",
+     "sensors": ["tool:x", "tool:y", ...],
+     "sets": [{"position": {"z": -0.294}, "frequency": [Hz, ...], "damping": [ratio, ...],
+               "shape_re": [[per sensor] per mode], "shape_im": [[...] per mode]}, ...]}
+
+``shape_im`` may be omitted for real shapes.
+"""
+
+from __future__ import annotations
+
+import json
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cappe.exceptions import DataError
+from cappe.io.files import write_json
+
+__all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "modal_data_from_mapping", "read_modal_data", "write_modal_data"]
+
+MODAL_FORMAT = "cappe.modal/1"
+
+
+@dataclass(frozen=True)
+class ModalDataSet:
+    """Modes identified (or simulated) at one axis position.
+
+    Attributes
+    ----------
+    position : dict
+        Axis values, e.g. ``{"z": 0.135}`` (m); empty for a model without axes.
+    frequency : ndarray, shape (n_modes,)
+        Natural frequencies in Hz.
+    damping : ndarray, shape (n_modes,)
+        Damping ratios.
+    shapes : ndarray of complex, shape (n_sensors, n_modes)
+        Mode shapes at the sensors, one mode per column.
+    """
+
+    position: dict[str, float]
+    frequency: NDArray[np.float64]
+    damping: NDArray[np.float64]
+    shapes: NDArray[np.complex128]
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequency.size)
+
+    @property
+    def poles(self) -> NDArray[np.complex128]:
+        """Poles ``-zeta omega + 1j omega sqrt(1 - zeta^2)`` in rad/s (omega = 2 pi f)."""
+        w = 2 * np.pi * self.frequency
+        z = self.damping
+        return np.asarray(-z * w + 1j * w * np.sqrt(np.clip(1 - z**2, 0, None)), dtype=complex)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "position": dict(self.position),
+            "frequency": self.frequency.tolist(),
+            "damping": self.damping.tolist(),
+            "shape_re": self.shapes.real.T.tolist(),
+            "shape_im": self.shapes.imag.T.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class ModalData:
+    """Modal data at one or more axis positions, all at the same sensor channels.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> data = ModalData(("n1:x",), (ModalDataSet({}, np.array([10.0]), np.array([0.01]), np.ones((1, 1), complex)),))
+    >>> data.to_dict()["sets"][0]["frequency"]
+    [10.0]
+    """
+
+    sensors: tuple[str, ...]
+    sets: tuple[ModalDataSet, ...] = field(default=())
+    source: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": MODAL_FORMAT, "sensors": list(self.sensors), "sets": [s.to_dict() for s in self.sets]}
+
+
+def _where(source: str, entry: str) -> str:
+    return f"({source}, {entry})" if source else f"({entry})"
+
+
+def _numbers(value: object, what: str, source: str, *, length: int | None = None) -> NDArray[np.float64]:
+    try:
+        arr = np.asarray(value, dtype=float)
+    except (TypeError, ValueError) as exc:
+        msg = f"{what} must be a list of numbers {_where(source, what)}"
+        raise DataError(msg) from exc
+    if arr.ndim != 1 or (length is not None and arr.size != length):
+        expected = f"{length} numbers" if length is not None else "a flat list of numbers"
+        msg = f"{what} must be {expected}; got shape {arr.shape} {_where(source, what)}"
+        raise DataError(msg)
+    if not np.all(np.isfinite(arr)):
+        msg = f"{what} contains NaN or Inf {_where(source, what)}"
+        raise DataError(msg)
+    return arr
+
+
+def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalData:
+    """Validate a parsed ``cappe.modal/1`` document."""
+    if not isinstance(data, Mapping) or data.get("format") != MODAL_FORMAT:
+        got = data.get("format") if isinstance(data, Mapping) else type(data).__name__
+        msg = f"modal data must have \"format\": \"{MODAL_FORMAT}\"; got {got!r} {_where(source, 'format')}"
+        raise DataError(msg)
+    sensors = data.get("sensors")
+    if not isinstance(sensors, Sequence) or isinstance(sensors, str) or not sensors or \
+            not all(isinstance(s, str) for s in sensors):
+        msg = f"sensors must be a non-empty list of channel labels like 'node:x' {_where(source, 'sensors')}"
+        raise DataError(msg)
+    if len(set(sensors)) != len(sensors):
+        msg = f"sensors must be unique {_where(source, 'sensors')}"
+        raise DataError(msg)
+    raw_sets = data.get("sets")
+    if not isinstance(raw_sets, Sequence) or isinstance(raw_sets, str) or not raw_sets:
+        msg = f"sets must be a non-empty list {_where(source, 'sets')}"
+        raise DataError(msg)
+    sets = []
+    n_s = len(sensors)
+    for k, raw in enumerate(raw_sets):
+        entry = f"sets[{k}]"
+        if not isinstance(raw, Mapping):
+            msg = f"{entry} must be a mapping {_where(source, entry)}"
+            raise DataError(msg)
+        position = raw.get("position", {})
+        if not isinstance(position, Mapping):
+            msg = f"{entry}.position must be a mapping axis -> value {_where(source, entry)}"
+            raise DataError(msg)
+        pos = {str(a): float(_numbers([v], f"{entry}.position.{a}", source)[0]) for a, v in position.items()}
+        freq = _numbers(raw.get("frequency"), f"{entry}.frequency", source)
+        m = freq.size
+        if np.any(freq <= 0):
+            msg = f"{entry}.frequency must be > 0 Hz {_where(source, entry)}"
+            raise DataError(msg)
+        damping = _numbers(raw.get("damping"), f"{entry}.damping", source, length=m)
+        if np.any(damping < 0) or np.any(damping >= 1):
+            msg = f"{entry}.damping ratios must lie in [0, 1) {_where(source, entry)}"
+            raise DataError(msg)
+        shapes = np.zeros((n_s, m), dtype=complex)
+        for part, name in ((1.0, "shape_re"), (1j, "shape_im")):
+            rows = raw.get(name)
+            if rows is None and name == "shape_im":
+                continue
+            if not isinstance(rows, Sequence) or len(rows) != m:
+                msg = f"{entry}.{name} must list one shape per mode ({m}) {_where(source, entry)}"
+                raise DataError(msg)
+            for r, row in enumerate(rows):
+                shapes[:, r] += part * _numbers(row, f"{entry}.{name}[{r}]", source, length=n_s)
+        sets.append(ModalDataSet(pos, freq, damping, shapes))
+    return ModalData(tuple(sensors), tuple(sets), source)
+
+
+def read_modal_data(path: str | Path) -> ModalData:
+    """Read and validate a ``cappe.modal/1`` JSON file."""
+    p = Path(path)
+    try:
+        text = p.read_text()
+    except OSError as exc:
+        msg = f"cannot read modal data {p}: {exc.strerror or exc}"
+        raise DataError(msg) from exc
+    try:
+        data = json.loads(text)
+    except json.JSONDecodeError as exc:
+        msg = f"{p} is not valid JSON: {exc.msg} (line {exc.lineno})"
+        raise DataError(msg) from exc
+    return modal_data_from_mapping(data, str(p))
+
+
+def write_modal_data(path: str | Path, data: ModalData) -> None:
+    """Write modal data atomically as ``cappe.modal/1`` JSON."""
+    write_json(path, data.to_dict())
