@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from benchmarks import bench_matrices
+from benchmarks import bench_matrices, bench_sobol
 
 
 def main() -> None:
     bench_matrices.main()
+    bench_sobol.main()
 
 
 if __name__ == "__main__":
