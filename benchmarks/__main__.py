@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
-from benchmarks import bench_matrices, bench_sobol
+from benchmarks import bench_matrices, bench_modal, bench_sobol
 
 
 def main() -> None:
     bench_matrices.main()
+    bench_modal.main()
     bench_sobol.main()
 
 

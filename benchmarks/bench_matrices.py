@@ -28,7 +28,9 @@ def chain(n_bodies: int) -> NumericModel:
         b.parameter(f"k{i}", 1.0e7 * (1 + 0.1 * i), kind="stiffness")
         b.parameter(f"c{i}", 100.0, kind="damping")
     for i in range(n_bodies):
-        b.body(f"b{i}", mass="m", inertia={"xx": "J", "yy": "J", "zz": "J"}, position=[0, 0, 0.2 * i])
+        # centre of mass off the body origin and a product of inertia: M has full 6 x 6 blocks, as in real machines
+        b.body(f"b{i}", mass="m", inertia={"xx": "J", "yy": "J", "zz": "J", "xy": "J/10"}, position=[0, 0, 0.2 * i],
+               com=[0.01, 0.005, 0.02])
     six = ("x", "y", "z", "rx", "ry", "rz")
     for i in range(n_bodies + 1):
         a = "ground" if i == 0 else f"b{i - 1}"

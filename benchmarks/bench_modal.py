@@ -47,7 +47,7 @@ def main() -> None:
         model = chain(n_bodies)
         for batch in batches:
             params = model.nominal * rng.uniform(0.7, 1.3, size=(batch, model.nominal.size))
-            chunk = max(1, min(256, batch // 8))
+            chunk = max(1, min(256, batch // 4))
             one = ModalEngine(model, n_workers=1, chunk_size=chunk)
             two = ModalEngine(model, n_workers=2, chunk_size=chunk)
             one.evaluate(params[:2])  # compile caches

@@ -363,10 +363,8 @@ class ModalEngine:
         n = model.n_dof
         names = ("M", "K", "C", "G", "H") if exact else ("M", "K")
         mats = model.matrices(pb, position, names=names)
-        linv = _inverse_cholesky(mats["M"], self._mass_groups(position), offset)
-        linv_t = np.ascontiguousarray(np.swapaxes(linv, 1, 2))
-        reduced = linv @ mats["K"] @ linv_t
-        lam, vec = np.linalg.eigh(reduced)
+        reduction = _MassReduction(mats["M"], self._mass_groups(position), offset)
+        lam, vec = np.linalg.eigh(reduction.reduce(mats["K"]))
         scale = np.max(np.abs(lam), axis=1, keepdims=True)
         lam = np.where(np.abs(lam) < RIGID_TOLERANCE * np.maximum(scale, 1e-300), 0.0, lam)
         bad = np.flatnonzero(lam.min(axis=1) < 0)
@@ -378,7 +376,7 @@ class ModalEngine:
             raise ModelError(msg)
         m_out = track.n_modes if track is not None else self.n_modes
         n_cand = min(n, m_out + TRACKING_MARGIN) if track is not None else m_out
-        phi = linv_t @ np.ascontiguousarray(vec[:, :, :n_cand])  # (B, n, n_cand) mass-normalized
+        phi = reduction.shapes(vec[:, :, :n_cand])  # (B, n, n_cand) mass-normalized
         lam = lam[:, :n_cand]
         b = pb.shape[0]
         if track is not None:
@@ -393,11 +391,12 @@ class ModalEngine:
         sources = model.damping_sources(pb, position)
         zeta, contrib, gradient = _first_order_damping(sources, phi, omega, contributions)
         sensor_rows = self._sensor_rows(position)[1]
-        shapes = sensor_rows @ phi
+        dof_shapes = self._sensor_request == "dofs" or not model.structure.sensors and self._sensor_request is None
+        shapes = phi.copy() if dof_shapes else sensor_rows @ phi
         poles = cshapes = None
         if exact:
-            poles, psi = _exact_modes(mats, linv, linv_t, phi, omega)
-            cshapes = sensor_rows @ psi
+            poles, psi = _exact_modes(mats, reduction.inverse_mass(), phi, omega)
+            cshapes = psi if dof_shapes else sensor_rows @ psi
         return _Chunk(omega / (2 * np.pi), zeta, shapes, index, mac, contrib, gradient, poles, cshapes,
                       phi if full else None)
 
@@ -430,6 +429,65 @@ def modal_batch(
 def _first(indices: NDArray[np.intp], k: int = 5) -> str:
     shown = ", ".join(str(int(i)) for i in indices[:k])
     return f"[{shown}{', ...' if indices.size > k else ''}] ({indices.size} in all)"
+
+
+class _MassReduction:
+    """Reduction of ``K phi = lambda M phi`` to ``(L^-1 K L^-T) v = lambda v``, ``phi = L^-T v``, using the
+    block structure of M (the strategy depends only on the model, so every sample takes the same arithmetic).
+
+    * diagonal M (point masses, principal axes at the centre of mass): scaling by ``1/sqrt(m_i)``, O(n^2);
+    * equal contiguous blocks (6-DOF bodies with centre-of-mass offsets), n_dof >= BLOCK_MIN_DOF: block products,
+      O(s n^2) instead of O(n^3);
+    * otherwise dense products with the block-diagonal ``L^-1``.
+    """
+
+    #: Below this size the dense products beat many small block products (measured, benchmarks/bench_modal.py).
+    BLOCK_MIN_DOF = 48
+
+    def __init__(self, mass: Array, groups: list[NDArray[np.intp]], offset: int) -> None:
+        self.mass = mass
+        b, n, _ = mass.shape
+        self.linv = _inverse_cholesky(mass, groups, offset)
+        self.kind = "dense"
+        if len(groups) == 1 and np.array_equal(groups[0].ravel(), np.arange(n)):
+            size = groups[0].shape[1]
+            if size == 1:
+                self.kind = "diagonal"
+                self.scale = np.ascontiguousarray(np.diagonal(self.linv, axis1=1, axis2=2))
+            elif n >= self.BLOCK_MIN_DOF:
+                self.kind = "blocks"
+                nb = n // size
+                idx = groups[0]
+                self.blocks = np.ascontiguousarray(self.linv[:, idx[:, :, None], idx[:, None, :]])  # (B, nb, s, s)
+                self.size, self.n_blocks = size, nb
+        if self.kind == "dense":
+            self.linv_t = np.ascontiguousarray(np.swapaxes(self.linv, 1, 2))
+
+    def reduce(self, stiffness: Array) -> Array:
+        b, n, _ = stiffness.shape
+        if self.kind == "diagonal":
+            return stiffness * self.scale[:, :, None] * self.scale[:, None, :]
+        if self.kind == "blocks":
+            s, nb = self.size, self.n_blocks
+            left = self.blocks @ stiffness.reshape(b, nb, s, n)  # rows: L_I^-1 K_I.  (B, nb, s, n)
+            cols = np.ascontiguousarray(left.reshape(b, n, nb, s).transpose(0, 2, 1, 3))  # (B, nb, n, s)
+            right = cols @ np.swapaxes(self.blocks, 2, 3)  # columns: (.) L_J^-T
+            return np.ascontiguousarray(right.transpose(0, 2, 1, 3).reshape(b, n, n))
+        return self.linv @ stiffness @ self.linv_t
+
+    def shapes(self, vectors: Array) -> Array:
+        b, n, m = vectors.shape
+        if self.kind == "diagonal":
+            return vectors * self.scale[:, :, None]
+        if self.kind == "blocks":
+            s, nb = self.size, self.n_blocks
+            out = np.swapaxes(self.blocks, 2, 3) @ np.ascontiguousarray(vectors).reshape(b, nb, s, m)
+            return out.reshape(b, n, m)
+        return self.linv_t @ np.ascontiguousarray(vectors)
+
+    def inverse_mass(self) -> Array:
+        linv_t = np.ascontiguousarray(np.swapaxes(self.linv, 1, 2))
+        return linv_t @ self.linv
 
 
 def _inverse_cholesky(mass: Array, groups: list[NDArray[np.intp]], offset: int) -> Array:
@@ -508,7 +566,7 @@ def _track(reference: ModeReference, phi: Array) -> tuple[NDArray[np.intp], Arra
 
 
 def _exact_modes(
-    mats: dict[str, Array], linv: Array, linv_t: Array, phi: Array, omega: Array
+    mats: dict[str, Array], minv: Array, phi: Array, omega: Array
 ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """Complex poles and displacement shapes of the full damped system, paired with the real modes.
 
@@ -517,7 +575,6 @@ def _exact_modes(
     below 0.5: overdamped) gets NaN.
     """
     b, n, m = phi.shape
-    minv = linv_t @ linv
     stiff = mats["K"] + 1j * mats["H"] if np.any(mats["H"]) else mats["K"]
     state = np.zeros((b, 2 * n, 2 * n), dtype=stiff.dtype)
     state[:, :n, n:] = np.eye(n)
