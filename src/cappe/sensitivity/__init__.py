@@ -1,0 +1,31 @@
+"""Sensitivity analysis: local (analytic) sensitivities, percentage tables, cost landscapes, Sobol' indices and
+Morris screening of vectorized models, and the model GSA per mode, position and criterion."""
+
+from cappe.sensitivity._gsa import CRITERIA, ModelSobolResult, model_sobol
+from cappe.sensitivity._local import (
+    CostLandscape,
+    ModalCost,
+    PercentageTable,
+    cost_landscape,
+    modal_sensitivity,
+    percentage_table,
+)
+from cappe.sensitivity._morris import MorrisResult, morris_screening
+from cappe.sensitivity._sobol import SobolResult, sobol_analyze, sobol_indices
+
+__all__ = [
+    "CRITERIA",
+    "CostLandscape",
+    "ModalCost",
+    "ModelSobolResult",
+    "MorrisResult",
+    "PercentageTable",
+    "SobolResult",
+    "cost_landscape",
+    "modal_sensitivity",
+    "model_sobol",
+    "morris_screening",
+    "percentage_table",
+    "sobol_analyze",
+    "sobol_indices",
+]
