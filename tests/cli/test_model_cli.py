@@ -228,11 +228,17 @@ def test_readme_documents_commands():
     assert len(_readme_commands()) >= 6
 
 
+@pytest.fixture(scope="module")
+def readme_dir(tmp_path_factory):
+    """One working directory for the README's commands, in order (later ones read files earlier ones wrote)."""
+    return tmp_path_factory.mktemp("readme")
+
+
 @pytest.mark.parametrize("command", _readme_commands())
-def test_readme_command_runs_as_subprocess(command):
+def test_readme_command_runs_as_subprocess(command, readme_dir):
     cappe = Path(sys.executable).with_name("cappe")
     argv = [str(cappe), *command.split()[1:]]
-    result = subprocess.run(argv, capture_output=True, text=True, timeout=120, check=False)
+    result = subprocess.run(argv, capture_output=True, text=True, timeout=300, check=False, cwd=readme_dir)
     assert result.returncode == 0, result.stderr
 
 

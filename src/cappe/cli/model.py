@@ -28,6 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = cmds.add_parser("modes", help="natural frequencies, damping ratios, mode shapes")
     add_model_options(p)
     p.add_argument("--damping", choices=["exact", "first-order", "undamped"], default="exact")
+    p.add_argument("--modal-out", metavar="FILE", help="also write the modes at the sensors as cappe.modal/1 JSON")
+    p.add_argument("--sensors", metavar="LIST", help="comma-separated sensor channels or nodes for --modal-out")
+    p.add_argument("--all-positions", action="store_true",
+                   help="with --modal-out: one set per combination of the model's listed axis positions")
     p.set_defaults(func=modes)
 
     for name, func, helptext in (
@@ -203,8 +207,28 @@ def modes(args: argparse.Namespace) -> int:
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
         lines.append(f"{r + 1:>4} {result.frequency[r]:>15.3f} {100 * result.damping[r]:>12.4f}  {result.dofs[k]}{tag}")
     lines.extend(notes)
+    if args.modal_out:
+        lines.append(_write_modal(ctx, args))
     emit(args, data, "\n".join(lines))
     return 0
+
+
+def _write_modal(ctx: ModelContext, args: argparse.Namespace) -> str:
+    import itertools
+
+    from cappe.io import write_modal_data
+    from cappe.modal import ModalEngine
+
+    axes = ctx.structure.axes
+    if args.all_positions and axes:
+        combos = itertools.product(*[axis.positions or (ctx.position[axis.name],) for axis in axes])
+        positions = [dict(zip([a.name for a in axes], combo, strict=True)) for combo in combos]
+    else:
+        positions = [ctx.position]
+    engine = ModalEngine(ctx.numeric, sensors=names(args.sensors))
+    data = engine.modal_data(positions, ctx.values, exact=args.damping == "exact")
+    write_modal_data(args.modal_out, data)
+    return f"wrote {len(data.sets)} modal set(s) at {len(data.sensors)} channels to {args.modal_out}"
 
 
 # -- tf / zpk ---------------------------------------------------------------------------------------

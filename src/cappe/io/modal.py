@@ -24,7 +24,14 @@ from numpy.typing import NDArray
 from cappe.exceptions import DataError
 from cappe.io.files import write_json
 
-__all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "modal_data_from_mapping", "read_modal_data", "write_modal_data"]
+__all__ = [
+    "MODAL_FORMAT",
+    "ModalData",
+    "ModalDataSet",
+    "modal_data_from_mapping",
+    "read_modal_data",
+    "write_modal_data",
+]
 
 MODAL_FORMAT = "cappe.modal/1"
 

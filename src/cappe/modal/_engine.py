@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeVar
+from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
 from numpy.typing import NDArray
@@ -23,6 +23,9 @@ from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import DampingSources, NumericModel, ParamsLike
 from cappe.model.structure import Structure
 from cappe.parallel import map_chunks
+
+if TYPE_CHECKING:
+    from cappe.modal._derivatives import ModalDerivatives
 
 __all__ = ["ModalEngine", "ModeReference", "modal_batch"]
 
@@ -229,7 +232,7 @@ class ModalEngine:
         position: Mapping[str, float] | None = None,
         *,
         track: ModeReference | bool = False,
-    ) -> Any:
+    ) -> ModalDerivatives:
         """Analytic derivatives of frequencies, damping ratios and sensor shapes at one parameter vector.
 
         Returns a :class:`cappe.modal.ModalDerivatives`.

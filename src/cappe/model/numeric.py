@@ -15,9 +15,9 @@ from typing import Any, cast
 
 import numpy as np
 import scipy.sparse as sps
-from scipy.sparse.csgraph import connected_components
 import sympy as sp
 from numpy.typing import NDArray
+from scipy.sparse.csgraph import connected_components
 
 from cappe.exceptions import ModelError
 from cappe.model.structure import Structure

@@ -1,0 +1,84 @@
+"""``cappe sensitivity MODEL --local | --sobol``: local percentage tables and global Sobol indices."""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "sensitivity",
+        help="local sensitivities (+-x %% table, normalized derivatives) or Sobol indices against reference modes",
+    )
+    add_model_options(p)
+    mode = p.add_mutually_exclusive_group(required=True)
+    mode.add_argument("--local", action="store_true", help="percentage table and normalized derivatives")
+    mode.add_argument("--sobol", action="store_true", help="Sobol indices per reference mode, position, criterion")
+    p.add_argument("--percent", type=float, default=10.0, help="--local: size of the parameter changes (default 10)")
+    p.add_argument("--reference", metavar="FILE.json", help="--sobol: reference modes (cappe.modal/1)")
+    p.add_argument("--n", type=int, default=1024, help="--sobol: base sample size, a power of two (default 1024)")
+    p.add_argument("--seed", type=int, default=0, help="--sobol: random seed (default 0)")
+    p.add_argument("--parameters", metavar="LIST",
+                   help="comma-separated parameters (default: all for --local, the unknown ones for --sobol)")
+    p.add_argument("--criteria", metavar="LIST", default="macxp,ndd2,frequency,damping",
+                   help="--sobol: outputs per mode (default macxp,ndd2,frequency,damping)")
+    p.add_argument("--threshold", type=float, default=0.01, help="--sobol: significance threshold on ST (default 0.01)")
+    p.add_argument("--plot", metavar="FILE.png", help="--sobol: S1/ST bar plot of the first outputs")
+    p.set_defaults(func=run)
+
+
+def run(args: argparse.Namespace) -> int:
+    ctx = ModelContext(args)
+    if args.local:
+        return _local(ctx, args)
+    return _sobol(ctx, args)
+
+
+def _local(ctx: ModelContext, args: argparse.Namespace) -> int:
+    from cappe.sensitivity import modal_sensitivity, percentage_table
+
+    table = percentage_table(ctx.numeric, ctx.values, ctx.position, percent=args.percent,
+                             parameters=names(args.parameters))
+    derivs = modal_sensitivity(ctx.numeric, ctx.values, ctx.position)
+    nf, nz = derivs.normalized()
+    data = table.to_dict()
+    data["normalized"] = {
+        "parameter_names": list(derivs.parameter_names),
+        "frequency": np.nan_to_num(nf).tolist(),
+        "damping": np.nan_to_num(nz).tolist(),
+    }
+    modes = ", ".join(f"f{r + 1} = {f:.2f} Hz (zeta {100 * z:.3g} %)"
+                      for r, (f, z) in enumerate(zip(table.frequency, table.damping, strict=True)))
+    text = f"{ctx.structure.name}: changes in % for +-{args.percent:g} % parameter changes\n{modes}\n" + table.to_text()
+    emit(args, data, text)
+    return 0
+
+
+def _sobol(ctx: ModelContext, args: argparse.Namespace) -> int:
+    from cappe.io import read_modal_data
+    from cappe.sensitivity import model_sobol
+
+    if not args.reference:
+        msg = "--sobol needs --reference FILE.json (modal data, format cappe.modal/1)"
+        raise UsageError(msg)
+    reference = read_modal_data(args.reference)
+    result = model_sobol(ctx.numeric, reference, parameters=names(args.parameters), n=args.n, rng=args.seed,
+                         criteria=names(args.criteria) or [], progress=not args.json)
+    if args.plot:
+        result.plot(args.plot)
+    data = result.to_dict()
+    significant = result.significant(args.threshold)
+    data["significant"] = {k: list(v) for k, v in significant.items()}
+    lines = [f"{ctx.structure.name}: Sobol indices of {len(result.sobol.output_names)} outputs, "
+             f"{len(result.names)} parameters, N = {args.n} ({args.n * (len(result.names) + 2)} model runs "
+             f"per position); parameters with ST > {args.threshold:g}:"]
+    for output, params in significant.items():
+        lines.append(f"  {output:<28} {', '.join(params) if params else '-'}")
+    if args.plot:
+        lines.append(f"plot written to {args.plot}")
+    emit(args, data, "\n".join(lines))
+    return 0
