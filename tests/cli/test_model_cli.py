@@ -248,3 +248,9 @@ def test_demo_prints_modes_and_tfs(capsys):
     assert "G11(s)" in out
     assert "G21(s)" in out
     assert out.count("mode ") >= 13  # 2 two-mass modes + 11 spindle modes
+
+
+def test_readme_python_api_runs(tmp_path, monkeypatch):
+    block = README.read_text().split("## Python API", 1)[1].split("```python", 1)[1].split("```", 1)[0]
+    monkeypatch.chdir(tmp_path)
+    exec(compile(block, "README.md", "exec"), {})  # noqa: S102 (our own documentation)
