@@ -8,16 +8,10 @@ ratios are meaningful on any machine.
 
 from __future__ import annotations
 
-import json
-import platform
-import time
-from pathlib import Path
-
 import numpy as np
 
+from benchmarks._common import best, write_results
 from cappe.model import NumericModel, StructureBuilder
-
-RESULTS = Path(__file__).resolve().parent / "results"
 
 
 def chain(n_bodies: int) -> NumericModel:
@@ -44,19 +38,12 @@ def chain(n_bodies: int) -> NumericModel:
     return NumericModel(b.build())
 
 
-def _best(func, repeat: int = 3) -> float:  # type: ignore[no-untyped-def]
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def _measure(model: NumericModel, params: np.ndarray) -> dict[str, float]:  # type: ignore[type-arg]
     model.matrices(params[:2])  # warm the pattern cache
-    t_batched = _best(lambda: model.matrices(params, names=("M", "K")))
-    t_loop = _best(lambda: [model.matrices(p, names=("M", "K")) for p in params])
+    t_batched = best(lambda: model.matrices(params, names=("M", "K")))
+    t_loop = best(lambda: [model.matrices(p, names=("M", "K")) for p in params])
     mats = model.matrices(params, names=("M", "K"))
 
     def eig() -> None:
@@ -64,7 +51,7 @@ def _measure(model: NumericModel, params: np.ndarray) -> dict[str, float]:  # ty
         inv = np.linalg.inv(chol)
         np.linalg.eigvalsh(inv @ mats["K"] @ np.swapaxes(inv, 1, 2))
 
-    t_eig = _best(eig)
+    t_eig = best(eig)
     return {"batched_s": t_batched, "loop_s": t_loop, "eigensolve_s": t_eig}
 
 
@@ -84,10 +71,7 @@ def main() -> None:
               f"{t['loop_s'] * 1e3:8.2f} ms ({t['loop_s'] / t['batched_s']:6.1f}x), eigen-solves "
               f"{t['eigensolve_s'] * 1e3:8.2f} ms (matrices cost {100 * t['batched_s'] / t['eigensolve_s']:5.1f} % "
               "of the solves)")
-    RESULTS.mkdir(exist_ok=True)
-    out = {"benchmark": "matrices", "machine": platform.processor() or platform.machine(),
-           "python": platform.python_version(), "rows": rows}
-    (RESULTS / "matrices.json").write_text(json.dumps(out, indent=2) + "\n")
+    write_results("matrices", rows)
 
 
 if __name__ == "__main__":

@@ -15,29 +15,12 @@ Reported: ``fraction_of_bound = t_bound / t_engine_1`` (target >= 0.7 for n_dof 
 
 from __future__ import annotations
 
-import json
-import os
-import platform
-import time
-from collections.abc import Callable
-from pathlib import Path
-
 import numpy as np
 
+from benchmarks._common import best, write_results
 from benchmarks.bench_matrices import chain
 from cappe.modal import ModalEngine
 from cappe.parallel import single_threaded_blas
-
-RESULTS = Path(__file__).resolve().parent / "results"
-
-
-def _best(func: Callable[[], object], repeat: int = 5) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def main() -> None:
@@ -51,15 +34,15 @@ def main() -> None:
             one = ModalEngine(model, n_workers=1, chunk_size=chunk)
             two = ModalEngine(model, n_workers=2, chunk_size=chunk)
             one.evaluate(params[:2])  # compile caches
-            t_one = _best(lambda: one.evaluate(params))  # noqa: B023 (called inside the iteration)
-            t_two = _best(lambda: two.evaluate(params))  # noqa: B023
+            t_one = best(lambda: one.evaluate(params))  # noqa: B023 (called inside the iteration)
+            t_two = best(lambda: two.evaluate(params))  # noqa: B023
             mats = model.matrices(params, names=("M", "K"))
             linv = np.linalg.inv(np.linalg.cholesky(mats["M"]))
             reduced = linv @ mats["K"] @ np.swapaxes(linv, 1, 2)
             with single_threaded_blas():
-                t_bound = _best(lambda: np.linalg.eigh(reduced))  # noqa: B023
+                t_bound = best(lambda: np.linalg.eigh(reduced))  # noqa: B023
                 n_loop = min(batch, 64)
-                t_loop = _best(
+                t_loop = best(
                     lambda: [model.system(p).modes("first-order") for p in params[:n_loop]],  # noqa: B023
                     repeat=2,
                 ) * batch / n_loop
@@ -83,16 +66,7 @@ def main() -> None:
                 f"{row['evaluations_per_s_2']:9.0f}/s (2 threads, {row['thread_speedup']:4.2f}x); "
                 f"{row['fraction_of_bound']:4.2f} of the eigh bound; {row['speedup_vs_loop']:5.1f}x the loop"
             )
-    RESULTS.mkdir(exist_ok=True)
-    out = {
-        "benchmark": "modal",
-        "machine": platform.processor() or platform.machine(),
-        "cores": len(os.sched_getaffinity(0)),
-        "python": platform.python_version(),
-        "numpy": np.__version__,
-        "rows": rows,
-    }
-    (RESULTS / "modal.json").write_text(json.dumps(out, indent=2) + "\n")
+    write_results("modal", rows)
 
 
 if __name__ == "__main__":

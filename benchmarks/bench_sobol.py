@@ -10,20 +10,16 @@ linearly (labelled so in the printed line and the JSON).
 
 from __future__ import annotations
 
-import json
-import platform
 import time
-from collections.abc import Callable
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 from SALib.analyze import sobol as salib_sobol_analyze
 from SALib.sample import sobol as salib_sobol_sample
 
+from benchmarks._common import best, write_results
 from cappe.sensitivity import sobol_analyze
 
-RESULTS = Path(__file__).resolve().parent / "results"
 D, N, N_OUTPUTS = 27, 1024, 160
 SALIB_BUDGET_S = 120.0  # time SALib on all outputs only if its estimated total stays below this
 SEED_SAMPLE, SEED_BOOTSTRAP = 20240601, 7
@@ -39,13 +35,6 @@ def synthetic_outputs(X: np.ndarray, n_outputs: int, rng: np.random.Generator) -
     return np.asarray(linear + interactions + mix)
 
 
-def _best(func: Callable[[], Any], repeat: int = 3) -> float:
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        func()
-        times.append(time.perf_counter() - t0)
-    return min(times)
 
 
 def _row(second_order: bool, salib_first: int) -> dict[str, Any]:
@@ -57,7 +46,7 @@ def _row(second_order: bool, salib_first: int) -> dict[str, Any]:
     def ours() -> Any:
         return sobol_analyze(Y, names=names, second_order=second_order, rng=SEED_BOOTSTRAP)
 
-    t_ours = _best(ours)
+    t_ours = best(ours)
     res = ours()
     keys = ["S1", "S1_conf", "ST", "ST_conf"] + (["S2", "S2_conf"] if second_order else [])
 
@@ -94,10 +83,7 @@ def main() -> None:
               f"{row['vectorized_s']:7.3f} s, SALib loop {row['salib_loop_s']:8.2f} s ({row['salib_timing']}), "
               f"{row['speedup_vs_salib']:6.1f}x; max |difference| {row['max_abs_difference']:.1e} over "
               f"{row['outputs_compared']} outputs")
-    RESULTS.mkdir(exist_ok=True)
-    out = {"benchmark": "sobol", "machine": platform.processor() or platform.machine(),
-           "python": platform.python_version(), "rows": rows}
-    (RESULTS / "sobol.json").write_text(json.dumps(out, indent=2) + "\n")
+    write_results("sobol", rows)
 
 
 if __name__ == "__main__":

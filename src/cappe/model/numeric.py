@@ -74,6 +74,20 @@ class DampingSources:
         return np.array([k == "hysteretic" for k in self.kinds], dtype=bool)
 
 
+def _jacobian(expressions: Sequence[sp.Expr], symbols: Sequence[sp.Symbol]) -> tuple[list[tuple[int, int]],
+                                                                                  list[sp.Expr]]:
+    """Structurally non-zero partial derivatives: their (expression, symbol) indices and the derivatives."""
+    entries: list[tuple[int, int]] = []
+    derivatives: list[sp.Expr] = []
+    for j, expr in enumerate(expressions):
+        for i, sym in enumerate(symbols):
+            d = sp.diff(expr, sym)
+            if d != 0:
+                entries.append((j, i))
+                derivatives.append(d)
+    return entries, derivatives
+
+
 def compile_model(model: Structure | SymbolicModel) -> NumericModel:
     """Compile a Structure (or its SymbolicModel) into a NumericModel."""
     return NumericModel(model)
@@ -135,14 +149,7 @@ class NumericModel:
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
-        self._jacobian_entries: list[tuple[int, int]] = []
-        derivatives: list[sp.Expr] = []
-        for j, expr in enumerate(coefficients):
-            for i, sym in enumerate(self._param_symbols):
-                d = sp.diff(expr, sym)
-                if d != 0:
-                    self._jacobian_entries.append((j, i))
-                    derivatives.append(d)
+        self._jacobian_entries, derivatives = _jacobian(coefficients, self._param_symbols)
         self._jacobian_func = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
         self._residual_derivative_funcs = {
             name: sp.lambdify(
@@ -185,14 +192,7 @@ class NumericModel:
         self._source_rows_per_sample = any(
             not sp.sympify(v).free_symbols <= axis_set for row in rows for v in row
         )
-        self._source_jac_entries: list[tuple[int, int]] = []
-        derivatives: list[sp.Expr] = []
-        for j, expr in enumerate(coefficients):
-            for i, sym in enumerate(self._param_symbols):
-                d_expr = sp.diff(expr, sym)
-                if d_expr != 0:
-                    self._source_jac_entries.append((j, i))
-                    derivatives.append(d_expr)
+        self._source_jac_entries, derivatives = _jacobian(coefficients, self._param_symbols)
         self._source_jac = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
 
     def damping_sources(

@@ -1,0 +1,41 @@
+"""Timing and result-file helpers shared by the benchmarks."""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import time
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+RESULTS = Path(__file__).resolve().parent / "results"
+
+
+def best(func: Callable[[], Any], repeat: int = 3) -> float:
+    """Shortest wall time of ``repeat`` calls (s): the least disturbed measurement."""
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        func()
+        times.append(time.perf_counter() - t0)
+    return min(times)
+
+
+def write_results(name: str, rows: list[dict[str, Any]]) -> Path:
+    """Write ``benchmarks/results/NAME.json`` with the machine description and the rows."""
+    RESULTS.mkdir(exist_ok=True)
+    out = {
+        "benchmark": name,
+        "machine": platform.processor() or platform.machine(),
+        "cores": len(os.sched_getaffinity(0)),
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "rows": rows,
+    }
+    path = RESULTS / f"{name}.json"
+    path.write_text(json.dumps(out, indent=2) + "\n")
+    return path
