@@ -5,6 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from cappe.correlate import mac
 from cappe.exceptions import DataError, ModelError
 from cappe.io import ModalData
 from cappe.modal import ModalEngine
@@ -82,6 +83,18 @@ def test_modal_cost_is_zero_at_the_reference_and_its_gradient_matches_finite_dif
     batch = cost(np.vstack([nm.nominal, p]))
     assert batch.shape == (2,)
     assert batch[1] == pytest.approx(cost(p), rel=1e-12)
+
+
+def test_modal_cost_pairing_uses_the_mac(two_mass):
+    ref = reference_for(two_mass)
+    cost = ModalCost(two_mass, ref)
+    rng = np.random.default_rng(9)
+    shapes = rng.normal(size=(5, 2, 2))
+    index, values = cost._pairing(shapes, ref.sets[0].shapes)
+    for b in range(5):
+        full = mac(ref.sets[0].shapes, shapes[b])  # the public criterion, one sample at a time
+        np.testing.assert_array_equal(index[b], np.argmax(full, axis=1))
+        np.testing.assert_allclose(values[b], full.max(axis=1), rtol=1e-12)
 
 
 def test_cost_landscape_has_its_minimum_at_the_true_parameters(two_mass, tmp_path):

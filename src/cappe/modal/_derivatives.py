@@ -26,6 +26,7 @@ from cappe.exceptions import IllConditionedWarning, ModelError
 from cappe.modal._engine import ModalEngine, ModeReference, _track
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
+from cappe.systems.mechanical import MechanicalSystem
 
 __all__ = ["ModalDerivatives", "modal_derivatives"]
 
@@ -114,12 +115,15 @@ def derivatives(
     if p.ndim != 1:
         msg = "modal derivatives take a single parameter vector"
         raise ModelError(msg)
-    mats = model.matrices(p, position, names=("M", "K", "C", "H"))
+    mats = model.matrices(p, position, names=("M", "K", "C", "G", "H"))
     dmats = model.matrix_derivatives(p, position, names=("M", "K", "C", "H"))
-    system = model.system(p, position)
-    lam, phi = system.undamped_modes()
     n = model.n_dof
-    reference = engine.reference(None, position) if track is True else (track or None)
+    # only the undamped eigen-solution (with its PSD checks) is needed: no inputs or outputs
+    system = MechanicalSystem(M=mats["M"], C=mats["C"], K=mats["K"], G=mats["G"], H=mats["H"],
+                              B=np.zeros((n, 0)), S=np.zeros((0, n)), dofs=model.dofs, input_names=(),
+                              output_names=(), output_quantities=(), name=model.structure.name)
+    lam, phi = system.undamped_modes()
+    reference = engine._reference_for(track, position)
     if reference is not None:
         index = _track(reference, phi[None, :, :])[0][0]
     else:

@@ -123,6 +123,7 @@ class ModalEngine:
         self._sensor_request = sensors
         self._sensor_cache: dict[tuple[float, ...], tuple[tuple[str, ...], Array]] = {}
         self._group_cache: dict[tuple[float, ...], list[NDArray[np.intp]]] = {}
+        self._dof_channels = sensors == "dofs" or (sensors is None and not self.model.structure.sensors)
         self.sensors = self._sensor_rows(self.model.structure.default_position())[0]
 
     # -- sensors ----------------------------------------------------------------------------------
@@ -133,7 +134,7 @@ class ModalEngine:
             return cached
         request = self._sensor_request
         structure = self.model.structure
-        if request == "dofs" or (request is None and not structure.sensors):
+        if self._dof_channels:
             cached = (self.model.dofs, np.eye(self.model.n_dof))
         else:
             labels, rows = self.model.sensor_matrix(position=position)
@@ -187,6 +188,12 @@ class ModalEngine:
         mats = self.model.matrices(p, position, names=("M",))
         chunk = self._solve(p[None, :], position, track=previous, exact=False, contributions=False, full=True)
         return ModeReference(np.asarray(chunk.full_shapes)[0], mats["M"], chunk.frequency[0])
+
+    def _reference_for(self, track: ModeReference | bool, position: Mapping[str, float] | None) -> ModeReference | None:
+        """The reference a ``track`` argument stands for: True means the nominal modes at ``position``."""
+        if track is True:
+            return self.reference(None, position)
+        return track or None
 
     def references(
         self, positions: Sequence[Mapping[str, float]], params: ParamsLike = None
@@ -274,7 +281,7 @@ class ModalEngine:
         """
         p = self.model.vector(params)
         pb = p if p.ndim == 2 else p[None, :]
-        reference = self.reference(None, position) if track is True else (track or None)
+        reference = self._reference_for(track, position)
         chunks = map_chunks(
             lambda s: self._solve(pb[s], position, track=reference, exact=exact, contributions=contributions,
                                   full=full_shapes, offset=s.start),
@@ -300,7 +307,7 @@ class ModalEngine:
         """Apply ``func`` to the modes of each chunk and return its results in order (memory stays bounded)."""
         p = self.model.vector(params)
         pb = p if p.ndim == 2 else p[None, :]
-        reference = self.reference(None, position) if track is True else (track or None)
+        reference = self._reference_for(track, position)
 
         def run(s: slice) -> T:
             chunk = self._solve(pb[s], position, track=reference, exact=exact, contributions=contributions,
@@ -312,7 +319,6 @@ class ModalEngine:
 
     def _combine(self, chunks: list[_Chunk], pb: Array, position: Mapping[str, float] | None) -> ModalBatch:
         sensors = self._sensor_rows(position)[0]
-        sources = self.model.damping_sources(pb[:1], position)
 
         def cat(name: str) -> Any:
             values = [getattr(c, name) for c in chunks]
@@ -330,8 +336,8 @@ class ModalEngine:
             tracking_mac=cat("tracking_mac"),
             contributions=cat("contributions"),
             damping_gradient=cat("damping_gradient"),
-            source_names=sources.names,
-            source_elements=sources.elements,
+            source_names=self.model.source_names,
+            source_elements=self.model.source_elements,
             poles=cat("poles"),
             complex_shapes=cat("complex_shapes"),
             full_shapes=cat("full_shapes"),
@@ -394,12 +400,11 @@ class ModalEngine:
         sources = model.damping_sources(pb, position)
         zeta, contrib, gradient = _first_order_damping(sources, phi, omega, contributions)
         sensor_rows = self._sensor_rows(position)[1]
-        dof_shapes = self._sensor_request == "dofs" or not model.structure.sensors and self._sensor_request is None
-        shapes = phi.copy() if dof_shapes else sensor_rows @ phi
+        shapes = phi.copy() if self._dof_channels else sensor_rows @ phi
         poles = cshapes = None
         if exact:
             poles, psi = _exact_modes(mats, reduction.inverse_mass(), phi, omega)
-            cshapes = psi if dof_shapes else sensor_rows @ psi
+            cshapes = psi if self._dof_channels else sensor_rows @ psi
         return _Chunk(omega / (2 * np.pi), zeta, shapes, index, mac, contrib, gradient, poles, cshapes,
                       phi if full else None)
 

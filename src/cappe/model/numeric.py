@@ -146,6 +146,7 @@ class NumericModel:
         self.output_names = tuple(o.name for o in self.structure.outputs)
         self.output_quantities = tuple(o.quantity for o in self.structure.outputs)
         self._pattern_cache: dict[tuple[float, ...], dict[str, Array]] = {}
+        self._source_row_cache: dict[tuple[float, ...], Array] = {}
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
@@ -183,8 +184,8 @@ class NumericModel:
                     elements.append(e.name)
                     rows.append(dense)
         all_symbols = self._param_symbols + self._axis_symbols
-        self._source_names = tuple(names)
-        self._source_elements = tuple(elements)
+        self.source_names = tuple(names)
+        self.source_elements = tuple(elements)
         self._source_kinds = tuple(kinds)
         self._source_coef = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
         self._source_rows = sp.lambdify(all_symbols, rows, modules="numpy", cse=True)
@@ -210,7 +211,7 @@ class NumericModel:
         p = self.vector(params)
         pb = p if p.ndim == 2 else p[None, :]
         pos = self.position_vector(position)
-        n_b, n_s, n = pb.shape[0], len(self._source_names), self.n_dof
+        n_b, n_s, n = pb.shape[0], len(self.source_names), self.n_dof
         args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(n_b, v) for v in pos]
         coef = np.empty((n_b, n_s))
         for j, v in enumerate(self._source_coef(*args) if n_s else []):
@@ -225,8 +226,13 @@ class NumericModel:
             for b in range(n_b):
                 rows[b] = np.asarray(self._source_rows(*pb[b], *pos), dtype=float).reshape(n_s, n)
         else:
-            rows = np.asarray(self._source_rows(*pb[0], *pos), dtype=float).reshape(n_s, n)
-        return DampingSources(self._source_names, self._source_elements, self._source_kinds, coef, rows, jac)
+            cached = self._source_row_cache.get(pos)
+            if cached is None:
+                cached = np.asarray(self._source_rows(*pb[0], *pos), dtype=float).reshape(n_s, n)
+                cached.setflags(write=False)
+                self._source_row_cache[pos] = cached
+            rows = cached
+        return DampingSources(self.source_names, self.source_elements, self._source_kinds, coef, rows, jac)
 
     def _plan(self, terms: list[Term]) -> _MatrixPlan:
         axis_set = set(self._axis_symbols)
@@ -321,13 +327,6 @@ class NumericModel:
         graph = sps.coo_array((np.ones(nz.size), (nz // n, nz % n)), shape=(n, n))
         count, labels = connected_components(graph, directed=False)
         return [np.flatnonzero(labels == k) for k in range(count)]
-
-    def coefficients(self, params: ParamsLike = None, position: Mapping[str, float] | None = None) -> Array:
-        """Affine coefficients ``f_j(p, r)`` of all matrix terms: (n_coef,) or (B, n_coef)."""
-        p = self.vector(params)
-        pb = p if p.ndim == 2 else p[None, :]
-        coef = self._coefficient_values(pb, self.position_vector(position))
-        return coef if p.ndim == 2 else coef[0]
 
     def _coefficient_values(self, pb: Array, pos: tuple[float, ...]) -> Array:
         args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]

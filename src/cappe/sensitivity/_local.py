@@ -12,7 +12,6 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cappe.correlate import mac
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData
 from cappe.modal import ModalDerivatives, ModalEngine
@@ -213,8 +212,13 @@ class ModalCost:
                 raise DataError(msg)
 
     def _pairing(self, shapes: Array, ref_shapes: NDArray[Any]) -> tuple[NDArray[np.intp], Array]:
-        """Best-MAC model mode for each reference mode, per sample: indices and MAC (B, m_ref)."""
-        macs = np.stack([mac(ref_shapes, s) for s in shapes])  # (B, m_ref, m_model)
+        """Best-MAC model mode for each reference mode, per sample: indices and MAC (B, m_ref).
+
+        The MAC of :func:`cappe.correlate.mac`, batched; a model mode invisible at the sensors gets MAC 0.
+        """
+        cross = np.abs(np.conj(ref_shapes).T @ shapes) ** 2  # (B, m_ref, m_model)
+        norms = np.sum(np.abs(ref_shapes) ** 2, axis=0)[:, None] * np.sum(shapes**2, axis=1)[:, None, :]
+        macs = np.divide(cross, norms, out=np.zeros_like(cross), where=norms > 0)
         index = np.argmax(macs, axis=2)
         return index, np.take_along_axis(macs, index[:, :, None], axis=2)[:, :, 0]
 
