@@ -9,6 +9,7 @@ from __future__ import annotations
 __all__ = [
     "ConvergenceWarning",
     "DataError",
+    "DataWarning",
     "IllConditionedWarning",
     "ModelError",
     "NotFittedError",
@@ -33,3 +34,7 @@ class ConvergenceWarning(UserWarning):
 
 class IllConditionedWarning(UserWarning):
     """A numerical problem is so ill-conditioned that float results may be unreliable."""
+
+
+class DataWarning(UserWarning):
+    """Measured data can be used but looks suspect (clipped channel, low coherence, drift)."""

@@ -9,11 +9,14 @@ from cappe.io.modal import (
     read_modal_data,
     write_modal_data,
 )
+from cappe.io.timedata import TimeData, check_clipping
 
 __all__ = [
     "MODAL_FORMAT",
     "ModalData",
     "ModalDataSet",
+    "TimeData",
+    "check_clipping",
     "modal_data_from_mapping",
     "read_modal_data",
     "read_parameters",

@@ -23,6 +23,8 @@ class FRFData:
         Frequencies in Hz.
     H : ndarray, shape (n_out, n_in, n_freq)
         Complex frequency responses.
+    coherence : ndarray, shape (n_out, n_in, n_freq), optional
+        Ordinary (single input) or multiple coherence of measured FRFs in [0, 1]; None for model FRFs.
     """
 
     freq: NDArray[np.float64]
@@ -30,6 +32,7 @@ class FRFData:
     input_names: tuple[str, ...]
     output_names: tuple[str, ...]
     output_quantities: tuple[str, ...] = ()
+    coherence: NDArray[np.float64] | None = None
 
     def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
         """The FRF of one output/input pair."""
