@@ -25,6 +25,9 @@ class FRFData:
         Complex frequency responses.
     coherence : ndarray, shape (n_out, n_in, n_freq), optional
         Ordinary (single input) or multiple coherence of measured FRFs in [0, 1]; None for model FRFs.
+    window_decay : float, optional
+        Time constant tau (s) of an exponential window ``exp(-t / tau)`` applied to the response before the FRF was
+        estimated (impact tests). It shifts every pole by ``-1 / tau``; modal extraction adds ``1 / tau`` back.
     """
 
     freq: NDArray[np.float64]
@@ -33,6 +36,7 @@ class FRFData:
     output_names: tuple[str, ...]
     output_quantities: tuple[str, ...] = ()
     coherence: NDArray[np.float64] | None = None
+    window_decay: float | None = None
 
     def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
         """The FRF of one output/input pair."""
