@@ -184,13 +184,13 @@ def _check_time(time: NDArray[np.float64]) -> None:
             f"sample {first} (t = {time[first]:.9g} s)"
         )
         raise DataError(msg)
-    mean = (time[-1] - time[0]) / (time.size - 1)
-    off = np.abs(step - mean) > _UNIFORM_RTOL * mean
+    typical = float(np.median(step))
+    off = np.abs(step - typical) > _UNIFORM_RTOL * typical
     if np.any(off):
         first = int(np.flatnonzero(off)[0])
         msg = (
             f"time stamps must be uniformly spaced (missing or irregular samples); the step after sample {first} "
-            f"is {step[first]:.9g} s, the mean step is {mean:.9g} s"
+            f"is {step[first]:.9g} s, the typical (median) step is {typical:.9g} s"
         )
         raise DataError(msg)
 

@@ -47,13 +47,17 @@ class FRFData:
         for o, out in enumerate(self.output_names):
             for i, inp in enumerate(self.input_names):
                 quantity = self.output_quantities[o] if self.output_quantities else "displacement"
-                pairs.append(
-                    {
-                        "input": inp,
-                        "output": out,
-                        "unit": _UNITS.get(quantity, ""),
-                        "re": self.H[o, i].real.tolist(),
-                        "im": self.H[o, i].imag.tolist(),
-                    }
-                )
-        return {"frequency": self.freq.tolist(), "frf": pairs}
+                pair: dict[str, Any] = {
+                    "input": inp,
+                    "output": out,
+                    "unit": _UNITS.get(quantity, ""),
+                    "re": self.H[o, i].real.tolist(),
+                    "im": self.H[o, i].imag.tolist(),
+                }
+                if self.coherence is not None:
+                    pair["coherence"] = self.coherence[o, i].tolist()
+                pairs.append(pair)
+        out: dict[str, Any] = {"frequency": self.freq.tolist(), "frf": pairs}
+        if self.window_decay is not None:
+            out["window_decay"] = self.window_decay
+        return out
