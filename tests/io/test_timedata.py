@@ -18,7 +18,8 @@ def test_properties_and_selection():
     assert (data.fs, data.n_samples, data.n_channels) == (100.0, 50, 2)
     assert data.duration == pytest.approx(0.5, rel=1e-12)
     sub = data.select(["a"])
-    assert sub.channels == ("a",) and sub.units == ("m/s^2",)
+    assert sub.channels == ("a",)
+    assert sub.units == ("m/s^2",)
     np.testing.assert_array_equal(sub.channel("a"), np.arange(50.0))
     assert data.unit("F") == "N"
 
