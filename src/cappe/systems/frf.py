@@ -57,7 +57,7 @@ class FRFData:
                 if self.coherence is not None:
                     pair["coherence"] = self.coherence[o, i].tolist()
                 pairs.append(pair)
-        out: dict[str, Any] = {"frequency": self.freq.tolist(), "frf": pairs}
+        result: dict[str, Any] = {"frequency": self.freq.tolist(), "frf": pairs}
         if self.window_decay is not None:
-            out["window_decay"] = self.window_decay
-        return out
+            result["window_decay"] = self.window_decay
+        return result

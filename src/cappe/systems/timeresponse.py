@@ -6,6 +6,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
@@ -101,8 +102,8 @@ def time_response(
     )
 
 
-def _with_noise(values: np.ndarray[Any, Any], level: float, gen: np.random.Generator) -> np.ndarray[Any, Any]:
+def _with_noise(values: NDArray[np.float64], level: float, gen: np.random.Generator) -> NDArray[np.float64]:
     if level == 0:
         return values
     rms = np.sqrt(np.mean(values**2, axis=0))
-    return values + level * rms * gen.standard_normal(values.shape)
+    return np.asarray(values + level * rms * gen.standard_normal(values.shape), dtype=float)
