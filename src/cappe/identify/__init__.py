@@ -2,4 +2,17 @@
 OE, BJ) with order selection and pruning, frequency-domain rational fits, modal extraction (LSCF / LSFD with
 stabilization diagrams) and rigid-body motion reconstruction."""
 
-__all__: list[str] = []
+from cappe.identify._lscf import PoleSelection, StabilizationDiagram, lscf_poles, select_poles, stabilization_diagram
+from cappe.identify._lsfd import ModalExtraction, ModalFit, extract_modes, lsfd
+
+__all__ = [
+    "ModalExtraction",
+    "ModalFit",
+    "PoleSelection",
+    "StabilizationDiagram",
+    "extract_modes",
+    "lscf_poles",
+    "lsfd",
+    "select_poles",
+    "stabilization_diagram",
+]

@@ -10,7 +10,7 @@ import numpy as np
 from cappe.systems.frf import FRFData
 from cappe.systems.zpk import ZeroPoleGainModel
 
-__all__ = ["bode_plot", "landscape_plot", "pole_zero_plot", "sobol_plot"]
+__all__ = ["bode_plot", "frf_plot", "landscape_plot", "pole_zero_plot", "sobol_plot", "stabilization_plot"]
 
 
 def _figure(rows: int) -> tuple[Any, Any]:
@@ -51,6 +51,82 @@ def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
     ax_phase.grid(True, which="both", alpha=0.3)
     if title:
         ax_mag.set_title(title)
+    return _save(fig, path)
+
+
+def frf_plot(frf: FRFData, path: str | Path, title: str = "", *, coherence_threshold: float = 0.8) -> Path:
+    """Measured FRFs: magnitude, phase and (when estimated) coherence of every output/input pair.
+
+    The coherence panel marks ``coherence_threshold``; frequency axis linear in Hz, magnitude on a log scale.
+    """
+    rows = 3 if frf.coherence is not None else 2
+    fig, axes = _figure(rows)
+    for o, out in enumerate(frf.output_names):
+        for i, inp in enumerate(frf.input_names):
+            h = frf.H[o, i]
+            (line,) = axes[0].semilogy(frf.freq, np.abs(h) + 1e-300, lw=1, label=f"{out}/{inp}")
+            axes[1].plot(frf.freq, np.degrees(np.angle(h)), lw=0.8, color=line.get_color())
+            if frf.coherence is not None:
+                axes[2].plot(frf.freq, frf.coherence[o, i], lw=0.8, color=line.get_color())
+    axes[0].set_ylabel("|H|")
+    axes[1].set_ylabel("phase (deg)")
+    axes[1].set_yticks([-180, -90, 0, 90, 180])
+    if frf.coherence is not None:
+        axes[2].axhline(coherence_threshold, color="0.4", ls="--", lw=0.8)
+        axes[2].set_ylim(0, 1.05)
+        axes[2].set_ylabel("coherence")
+    axes[-1].set_xlabel("frequency (Hz)")
+    axes[0].legend(loc="best", fontsize=8)
+    for ax in axes:
+        ax.grid(True, which="both", alpha=0.3)
+    if title:
+        axes[0].set_title(title)
+    return _save(fig, path)
+
+
+_FLAG_STYLE = {
+    "s": ("o", "tab:green", "stable (frequency, damping, vector)"),
+    "v": ("^", "tab:blue", "stable frequency and vector"),
+    "d": ("s", "tab:orange", "stable frequency and damping"),
+    "f": ("d", "tab:purple", "stable frequency"),
+    "o": ("+", "0.5", "new / unstable"),
+}
+
+
+def stabilization_plot(
+    diagram: Any, path: str | Path, *, frf: FRFData | None = None, selected: Any = None, title: str = ""
+) -> Path:
+    """Stabilization diagram: poles per model order over frequency, marked by stability, over the FRF magnitude.
+
+    ``diagram`` is a :class:`cappe.identify.StabilizationDiagram`; ``frf`` adds the sum of |H| over all pairs
+    (right axis, log) and ``selected`` (a :class:`cappe.identify.PoleSelection` or anything with ``frequency``)
+    draws the chosen physical poles as vertical lines. Excluded poles are not drawn.
+    """
+    fig, axes = _figure(1)
+    ax = axes
+    for flag, (marker, color, label) in _FLAG_STYLE.items():
+        idx = np.flatnonzero(np.asarray(diagram.flags) == flag)
+        if idx.size:
+            filled = marker != "+"
+            style = {"c": color, "edgecolors": "k", "linewidths": 0.3} if filled else {"c": color, "linewidths": 0.8}
+            ax.scatter(diagram.frequency[idx], diagram.order[idx], marker=marker, s=18, label=label, **style)
+    if selected is not None:
+        for k, f in enumerate(np.atleast_1d(selected.frequency)):
+            ax.axvline(float(f), color="tab:red", lw=0.8, ls=":", label="selected" if k == 0 else None)
+    ax.set_xlim(*diagram.band)
+    ax.set_xlabel("frequency (Hz)")
+    ax.set_ylabel("model order")
+    if frf is not None:
+        twin = ax.twinx()
+        inside = (frf.freq >= diagram.band[0]) & (frf.freq <= diagram.band[1])
+        total = np.abs(frf.H).sum(axis=(0, 1))
+        twin.semilogy(frf.freq[inside], total[inside] + 1e-300, color="0.3", lw=0.8)
+        twin.set_ylabel("sum |H|")
+        ax.set_zorder(twin.get_zorder() + 1)  # poles above the FRF curve
+        ax.patch.set_visible(False)
+    ax.legend(loc="upper left", fontsize=7)
+    ax.grid(True, alpha=0.3)
+    ax.set_title(title or f"stabilization diagram ({diagram.reference} LSCF)")
     return _save(fig, path)
 
 

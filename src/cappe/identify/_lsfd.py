@@ -1,0 +1,503 @@
+"""Residues and mode shapes from FRFs at known poles (least-squares frequency domain, LSFD), and the complete
+modal extraction ``FRFs -> stabilization diagram -> selected poles -> modal model``.
+
+Model of every FRF (output o, input i) at ``s = 1j omega``, for displacement-level outputs::
+
+    H_oi(s) = sum_r [ R_oir / (s - lambda_r) + conj(R_oir) / (s - conj(lambda_r)) ] + LR_oi / s**2 + UR_oi
+
+with real lower (``LR``, modes below the band: mass-like) and upper (``UR``, modes above: stiffness-like)
+residual coefficients, so that the time response is real. Velocity and acceleration outputs are the same
+model times ``s`` and ``s**2``; the residues ``R`` are therefore always displacement-level (receptance)
+residues, whatever the measured quantity.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cappe.exceptions import DataError
+from cappe.identify._lscf import (
+    PoleSelection,
+    StabilizationDiagram,
+    _band_lines,
+    _check_finite,
+    _check_frf,
+    _pole_frequency_damping,
+    lscf_poles,
+    select_poles,
+)
+from cappe.io.modal import ModalData, ModalDataSet
+from cappe.systems.frf import FRFData
+
+__all__ = ["ModalExtraction", "ModalFit", "extract_modes", "lsfd"]
+
+FloatArray = NDArray[np.float64]
+ComplexArray = NDArray[np.complex128]
+
+#: Time-derivative order of each output quantity (others are fitted as given, like displacement).
+_DERIVATIVE = {"displacement": 0, "elongation": 0, "velocity": 1, "acceleration": 2}
+
+
+def _derivative_orders(frf: FRFData) -> NDArray[np.intp]:
+    n_out = len(frf.output_names)
+    if not frf.output_quantities:
+        return np.zeros(n_out, dtype=np.intp)
+    if len(frf.output_quantities) != n_out:
+        msg = f"FRF output_quantities must name one quantity per output ({n_out}); got {len(frf.output_quantities)}"
+        raise DataError(msg)
+    return np.array([_DERIVATIVE.get(q, 0) for q in frf.output_quantities], dtype=np.intp)
+
+
+def _basis(s: ComplexArray, poles: ComplexArray, lower: bool, upper: bool) -> ComplexArray:
+    """Columns (n_f, 2 m + residuals): real and imaginary part of each residue, then LR and UR."""
+    a = 1.0 / (s[:, None] - poles[None, :])
+    b = 1.0 / (s[:, None] - poles.conj()[None, :])
+    cols = [a + b, 1j * (a - b)]
+    if lower:
+        cols.append((1.0 / s**2)[:, None])
+    if upper:
+        cols.append(np.ones((s.size, 1), dtype=complex))
+    return np.concatenate(cols, axis=1)
+
+
+@dataclass(frozen=True)
+class ModalFit:
+    """Modal model fitted to FRFs: poles, residues, mode shapes, participation and residual terms.
+
+    Attributes
+    ----------
+    poles : ndarray of complex, shape (n_modes,)
+        Physical poles in rad/s (upper half plane, corrected for an exponential window), ascending in frequency.
+    frequency : ndarray, shape (n_modes,)
+        Natural frequencies ``|lambda| / 2 pi`` in Hz.
+    damping : ndarray, shape (n_modes,)
+        Damping ratios ``-Re lambda / |lambda|``.
+    residues : ndarray of complex, shape (n_out, n_in, n_modes)
+        Displacement-level residues ``R[out, in, mode]`` (m/N/s for force inputs and displacement outputs).
+    shapes : ndarray of complex, shape (n_out, n_modes)
+        Mode shapes at the outputs, the best rank-one factor of each mode's residue matrix
+        ``R[:, :, r] ~ shapes[:, r] participation[:, r]^T``. Scaling: with driving points, the residue of a
+        driving point is ``psi_o**2 / (2j omega_d)`` (``omega_d = Im lambda``), which makes the shapes
+        mass-normalized for proportionally damped structures (``scaling = "driving point"``); otherwise the
+        largest component of each shape is 1 (``scaling = "unit max"``).
+    participation : ndarray of complex, shape (n_in, n_modes)
+        Modal participation factors per input.
+    lower_residual, upper_residual : ndarray, shape (n_out, n_in)
+        Real coefficients of the ``1 / s**2`` and constant residual terms (displacement level).
+    fit_error : ndarray, shape (n_out, n_in)
+        Relative misfit ``||H - H_fit|| / ||H||`` of each FRF over the band.
+    input_names, output_names, output_quantities : tuple of str
+        As in the FRFs.
+    band : tuple of float
+        Fitted band (Hz).
+    window_decay : float or None
+        Exponential window time constant (s) the poles were corrected for.
+    scaling : str
+        ``"driving point"`` or ``"unit max"``.
+    """
+
+    poles: ComplexArray
+    frequency: FloatArray
+    damping: FloatArray
+    residues: ComplexArray
+    shapes: ComplexArray
+    participation: ComplexArray
+    lower_residual: FloatArray
+    upper_residual: FloatArray
+    fit_error: FloatArray
+    input_names: tuple[str, ...]
+    output_names: tuple[str, ...]
+    output_quantities: tuple[str, ...]
+    band: tuple[float, float]
+    window_decay: float | None
+    scaling: str
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.poles.size)
+
+    def synthesize(self, freq: ArrayLike, *, windowed: bool = False) -> FRFData:
+        """FRFs of the modal model (with its residual terms) at ``freq`` (Hz, > 0).
+
+        ``windowed=True`` gives the FRFs as measured through the exponential window (poles shifted by
+        ``-1 / window_decay``), for comparison with the data the model was fitted to.
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> from cappe.systems.frf import FRFData
+        >>> f = np.linspace(1.0, 20.0, 200)
+        >>> lam = np.array([-0.5 + 60j])
+        >>> H = (1 / (2j * np.pi * f - lam) + 1 / (2j * np.pi * f - lam.conj()))[None, None]
+        >>> fit = lsfd(FRFData(f, H, ("F",), ("x",)), poles=lam, band=(1.0, 20.0))
+        >>> bool(np.allclose(fit.synthesize(f).H, H, rtol=1e-9))
+        True
+        """
+        f = np.atleast_1d(np.asarray(freq, dtype=float))
+        if f.ndim != 1 or not np.all(np.isfinite(f)) or np.any(f <= 0):
+            msg = "synthesis frequencies must be a 1-D array of finite values > 0 Hz"
+            raise DataError(msg)
+        s = 2j * np.pi * f
+        poles = self.poles - (1.0 / self.window_decay if windowed and self.window_decay else 0.0)
+        a = 1.0 / (s[None, :] - poles[:, None])  # (m, n_f)
+        b = 1.0 / (s[None, :] - poles.conj()[:, None])
+        H = np.einsum("oir,rf->oif", self.residues, a) + np.einsum("oir,rf->oif", self.residues.conj(), b)
+        H = H + self.lower_residual[..., None] / s**2 + self.upper_residual[..., None]
+        d = np.array([_DERIVATIVE.get(q, 0) for q in self.output_quantities] or [0] * len(self.output_names))
+        H = H * s[None, None, :] ** d[:, None, None]
+        return FRFData(f, H, self.input_names, self.output_names, self.output_quantities)
+
+    def to_modal_data(self, position: Mapping[str, float] | None = None) -> ModalData:
+        """The modes as :class:`cappe.io.modal.ModalData`, one set at ``position``; sensors are the output names."""
+        data_set = ModalDataSet(
+            dict(position or {}), self.frequency.copy(), self.damping.copy(), self.shapes.astype(complex)
+        )
+        return ModalData(tuple(self.output_names), (data_set,))
+
+    def to_dict(self) -> dict[str, Any]:
+        modes = []
+        for r in range(self.n_modes):
+            modes.append(
+                {
+                    "frequency": float(self.frequency[r]),
+                    "damping": float(self.damping[r]),
+                    "pole": [float(self.poles[r].real), float(self.poles[r].imag)],
+                    "shape_re": {o: float(v.real) for o, v in zip(self.output_names, self.shapes[:, r], strict=True)},
+                    "shape_im": {o: float(v.imag) for o, v in zip(self.output_names, self.shapes[:, r], strict=True)},
+                    "participation_re": {
+                        i: float(v.real) for i, v in zip(self.input_names, self.participation[:, r], strict=True)
+                    },
+                    "participation_im": {
+                        i: float(v.imag) for i, v in zip(self.input_names, self.participation[:, r], strict=True)
+                    },
+                }
+            )
+        return {
+            "format": "cappe.modal_fit/1",
+            "band": list(self.band),
+            "inputs": list(self.input_names),
+            "outputs": list(self.output_names),
+            "window_decay": self.window_decay,
+            "scaling": self.scaling,
+            "modes": modes,
+            "fit_error": {
+                f"{o}/{i}": float(self.fit_error[a, b])
+                for a, o in enumerate(self.output_names)
+                for b, i in enumerate(self.input_names)
+            },
+        }
+
+
+def _as_poles(poles: PoleSelection | ArrayLike) -> ComplexArray:
+    values = poles.poles if isinstance(poles, PoleSelection) else poles
+    try:
+        lam = np.atleast_1d(np.asarray(values, dtype=complex))
+    except (TypeError, ValueError) as exc:
+        msg = f"poles must be complex numbers in rad/s; got {values!r}"
+        raise DataError(msg) from exc
+    if lam.ndim != 1 or lam.size == 0 or not np.all(np.isfinite(lam)) or np.any(lam.imag <= 0):
+        msg = (
+            f"poles must be a non-empty 1-D array of finite poles in the upper half plane (Im > 0, rad/s); "
+            f"got {np.array2string(lam, precision=4)}"
+        )
+        raise DataError(msg)
+    return np.asarray(lam[np.argsort(np.abs(lam), kind="stable")], dtype=complex)
+
+
+def _driving_pairs(frf: FRFData, driving_points: Mapping[str, str] | None) -> list[tuple[int, int]]:
+    if not driving_points:
+        return []
+    pairs = []
+    for inp, out in driving_points.items():
+        if inp not in frf.input_names:
+            msg = f"driving_points: unknown input {inp!r}; FRF inputs: {', '.join(frf.input_names)}"
+            raise DataError(msg)
+        if out not in frf.output_names:
+            msg = (
+                f"driving_points: unknown output {out!r} for input {inp!r}; FRF outputs: {', '.join(frf.output_names)}"
+            )
+            raise DataError(msg)
+        pairs.append((frf.output_names.index(out), frf.input_names.index(inp)))
+    return pairs
+
+
+def _shapes(
+    residues: ComplexArray, poles: ComplexArray, driving: list[tuple[int, int]]
+) -> tuple[ComplexArray, ComplexArray]:
+    """Rank-one factors ``R[:, :, r] ~ psi_r l_r^T`` of each mode, scaled (see :class:`ModalFit`)."""
+    n_out, n_in, m = residues.shape
+    shapes = np.zeros((n_out, m), dtype=complex)
+    part = np.zeros((n_in, m), dtype=complex)
+    for r in range(m):
+        u_all, sv, _ = np.linalg.svd(residues[:, :, r], full_matrices=False)
+        if sv[0] == 0:
+            continue
+        u = u_all[:, 0]
+        proj = u.conj() @ residues[:, :, r]  # u^H R[:, i] for every input i
+        if driving:
+            o_idx = np.array([o for o, _ in driving])
+            i_idx = np.array([i for _, i in driving])
+            weight = float(np.sum(np.abs(u[o_idx]) ** 2))
+            c2 = 2j * poles[r].imag * np.sum(u[o_idx].conj() * proj[i_idx]) / weight if weight > 0 else 0.0
+            c = np.sqrt(complex(c2))
+            if c == 0:
+                continue
+            psi = c * u
+            k = int(np.argmax(np.abs(psi)))
+            if psi[k].real < 0:
+                psi, c = -psi, -c
+            shapes[:, r] = psi
+            part[:, r] = proj / c
+        else:
+            k = int(np.argmax(np.abs(u)))
+            shapes[:, r] = u / u[k]
+            part[:, r] = u[k] * proj
+    return shapes, part
+
+
+def lsfd(
+    frf: FRFData,
+    *,
+    poles: PoleSelection | ArrayLike,
+    band: Sequence[float],
+    lower_residual: bool = True,
+    upper_residual: bool = True,
+    driving_points: Mapping[str, str] | None = None,
+) -> ModalFit:
+    """Residues, mode shapes and participation factors at known poles by linear least squares (LSFD).
+
+    Parameters
+    ----------
+    frf : FRFData
+        FRFs ``H[out, in, freq]``; ``output_quantities`` (displacement, velocity, acceleration) select the
+        model form, and ``window_decay`` (s) says the poles were shifted by ``-1 / window_decay`` in the data.
+    poles : PoleSelection or array_like of complex, shape (n_modes,)
+        Physical poles in rad/s (upper half plane), e.g. from :func:`select_poles`.
+    band : (float, float)
+        Band in Hz; lines at 0 Hz are skipped.
+    lower_residual, upper_residual : bool
+        Include the ``1 / s**2`` and constant residual terms (displacement level).
+    driving_points : mapping input -> output, optional
+        Output measured at each input's location and direction; selects driving-point scaling of the shapes.
+
+    Returns
+    -------
+    ModalFit
+        Modes ascending in frequency.
+
+    Raises
+    ------
+    DataError
+        If the band is reversed or outside the data's frequency range, holds too few lines for the unknowns,
+        the poles are not in the upper half plane, or a driving point names an unknown input or output.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cappe.systems.frf import FRFData
+    >>> f = np.linspace(1.0, 50.0, 400)
+    >>> lam = np.array([-0.6 + 2j * np.pi * 20.0])
+    >>> s = 2j * np.pi * f
+    >>> H = (3j / (s - lam) - 3j / (s - lam.conj()))[None, None]
+    >>> fit = lsfd(FRFData(f, H, ("F",), ("x",)), poles=lam, band=(1.0, 50.0))
+    >>> complex(np.round(fit.residues[0, 0, 0], 9))
+    3j
+    """
+    freq, H = _check_frf(frf)
+    f_band, idx = _band_lines(freq, band)
+    idx = idx[freq[idx] > 0]
+    lam = _as_poles(poles)
+    driving = _driving_pairs(frf, driving_points)
+    deriv = _derivative_orders(frf)
+    Hb = H[:, :, idx]
+    _check_finite(Hb, freq[idx], frf)
+    n_out, n_in, n_f = Hb.shape
+    m = lam.size
+    n_unknown = 2 * m + int(lower_residual) + int(upper_residual)
+    if 2 * n_f < n_unknown:
+        msg = (
+            f"band ({f_band[0]:g}, {f_band[1]:g}) Hz holds {n_f} usable frequency lines; {m} modes with residual "
+            f"terms need at least {(n_unknown + 1) // 2}"
+        )
+        raise DataError(msg)
+    shift = 0.0 if frf.window_decay is None else 1.0 / float(frf.window_decay)
+    s: ComplexArray = np.asarray(2j * np.pi * freq[idx], dtype=complex)
+    base = _basis(s, np.asarray(lam - shift, dtype=complex), lower_residual, upper_residual)
+    coef = np.zeros((n_out, n_in, n_unknown))
+    fitted = np.zeros_like(Hb)
+    for d in np.unique(deriv):
+        outs = np.flatnonzero(deriv == d)
+        A = base * (s**d)[:, None]
+        A_real = np.concatenate([A.real, A.imag], axis=0)
+        scale = np.linalg.norm(A_real, axis=0)
+        scale = np.where(scale > 0, scale, 1.0)
+        rhs = Hb[outs].reshape(-1, n_f).T  # (n_f, n_outs * n_in)
+        b_real = np.concatenate([rhs.real, rhs.imag], axis=0)
+        x = np.linalg.lstsq(A_real / scale, b_real, rcond=None)[0] / scale[:, None]
+        coef[outs] = x.T.reshape(outs.size, n_in, n_unknown)
+        fitted[outs] = (A @ x).T.reshape(outs.size, n_in, n_f)
+    residues = coef[..., :m] + 1j * coef[..., m : 2 * m]
+    k = 2 * m
+    lower = coef[..., k] if lower_residual else np.zeros((n_out, n_in))
+    upper = coef[..., k + int(lower_residual)] if upper_residual else np.zeros((n_out, n_in))
+    norm = np.linalg.norm(Hb, axis=2)
+    error = np.linalg.norm(Hb - fitted, axis=2) / np.where(norm > 0, norm, 1.0)
+    shapes, part = _shapes(residues, lam, driving)
+    frequency, damping = _pole_frequency_damping(lam)
+    return ModalFit(
+        poles=lam,
+        frequency=frequency,
+        damping=damping,
+        residues=residues,
+        shapes=shapes,
+        participation=part,
+        lower_residual=lower,
+        upper_residual=upper,
+        fit_error=error,
+        input_names=tuple(frf.input_names),
+        output_names=tuple(frf.output_names),
+        output_quantities=tuple(frf.output_quantities),
+        band=f_band,
+        window_decay=None if frf.window_decay is None else float(frf.window_decay),
+        scaling="driving point" if driving else "unit max",
+    )
+
+
+@dataclass(frozen=True)
+class ModalExtraction:
+    """Result of :func:`extract_modes`: the stabilization diagram, the selected poles and the LSFD fit.
+
+    Attributes
+    ----------
+    diagram : StabilizationDiagram
+    selection : PoleSelection
+    fit : ModalFit
+    method : str
+        ``"plscf"`` or ``"lscf"``.
+    """
+
+    diagram: StabilizationDiagram
+    selection: PoleSelection
+    fit: ModalFit
+    method: str
+
+    @property
+    def frequency(self) -> FloatArray:
+        """Natural frequencies in Hz, ascending."""
+        return self.fit.frequency
+
+    @property
+    def damping(self) -> FloatArray:
+        """Damping ratios."""
+        return self.fit.damping
+
+    @property
+    def shapes(self) -> ComplexArray:
+        """Mode shapes at the outputs, shape (n_out, n_modes)."""
+        return self.fit.shapes
+
+    def to_modal_data(self, position: Mapping[str, float] | None = None) -> ModalData:
+        """See :meth:`ModalFit.to_modal_data`."""
+        return self.fit.to_modal_data(position)
+
+    def to_dict(self) -> dict[str, Any]:
+        fit = self.fit.to_dict()
+        return {
+            "format": "cappe.modal_extraction/1",
+            "method": self.method,
+            "band": list(self.fit.band),
+            "modes": fit["modes"],
+            "selection": self.selection.to_dict()["modes"],
+            "fit": fit,
+            "diagram": self.diagram.to_dict(),
+        }
+
+
+def extract_modes(
+    frf: FRFData,
+    *,
+    band: Sequence[float],
+    max_order: int = 40,
+    n_modes: int | None = None,
+    method: str = "plscf",
+    selection: str | Sequence[float] = "auto",
+    driving_points: Mapping[str, str] | None = None,
+    freq_tol: float = 0.01,
+    damping_tol: float = 0.05,
+    mac_tol: float = 0.98,
+    max_damping: float = 0.2,
+    min_fraction: float = 0.3,
+) -> ModalExtraction:
+    """Modal parameters from FRFs: (poly-reference) LSCF poles, stabilization, pole selection, LSFD.
+
+    Parameters
+    ----------
+    frf : FRFData
+        Measured or simulated FRFs ``H[out, in, freq]``; with ``window_decay`` set, poles are corrected for
+        the exponential window (``+1 / window_decay`` on the real part) before damping is computed.
+    band : (float, float)
+        Frequency band in Hz.
+    max_order : int
+        Highest denominator order; orders ``2, 4, ..., max_order`` are estimated.
+    n_modes : int, optional
+        Number of modes to keep (automatic selection); default: every cluster stable in ``min_fraction`` of
+        the orders.
+    method : {"plscf", "lscf"}
+        Poly-reference LSCF (PolyMAX) or common-denominator LSCF.
+    selection : "auto" or sequence of float
+        Automatic selection by clustering, or approximate natural frequencies (Hz) to pick poles near.
+    driving_points : mapping input -> output, optional
+        Driving-point FRFs for mode-shape scaling (see :class:`ModalFit`).
+    freq_tol, damping_tol, mac_tol, max_damping : float
+        Stabilization tolerances, see :func:`stabilization_diagram`.
+    min_fraction : float
+        See :func:`select_poles`.
+
+    Returns
+    -------
+    ModalExtraction
+
+    Raises
+    ------
+    DataError
+        From the steps (band, orders, no stable poles, ...) or for an unknown ``method`` / ``selection``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> from cappe.systems.frf import FRFData
+    >>> f = np.linspace(0.0, 100.0, 1001)
+    >>> lam = np.array([-0.4 + 2j * np.pi * 30.0, -0.9 + 2j * np.pi * 62.0])
+    >>> s = 2j * np.pi * f[:, None]
+    >>> H = np.stack([(v / (s - lam) + np.conj(v) / (s - lam.conj())).sum(1) for v in ([1j, 1j], [0.5j, -1j])])
+    >>> res = extract_modes(FRFData(f, H[:, None], ("F",), ("p1", "p2")), band=(5.0, 95.0), max_order=12)
+    >>> [round(float(x), 3) for x in res.frequency], [round(float(z), 5) for z in res.damping]
+    ([30.0, 62.0], [0.00212, 0.00231])
+    """
+    if method not in ("plscf", "lscf"):
+        msg = f"method must be 'plscf' (poly-reference LSCF) or 'lscf' (common denominator); got {method!r}"
+        raise DataError(msg)
+    if isinstance(selection, str) and selection != "auto":
+        msg = f"selection must be 'auto' or a list of approximate natural frequencies (Hz); got {selection!r}"
+        raise DataError(msg)
+    diagram = lscf_poles(
+        frf,
+        band=band,
+        max_order=max_order,
+        reference="poly" if method == "plscf" else "common",
+        freq_tol=freq_tol,
+        damping_tol=damping_tol,
+        mac_tol=mac_tol,
+        max_damping=max_damping,
+    )
+    if isinstance(selection, str):
+        chosen = select_poles(diagram, n_modes=n_modes, min_fraction=min_fraction)
+    else:
+        chosen = select_poles(diagram, near=selection)
+    fit = lsfd(frf, poles=chosen, band=band, driving_points=driving_points)
+    return ModalExtraction(diagram=diagram, selection=chosen, fit=fit, method=method)
