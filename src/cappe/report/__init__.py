@@ -1,5 +1,22 @@
-"""Plots and reports."""
+"""Plots, animations and reports."""
 
-from cappe.report.plots import bode_plot, landscape_plot, pole_zero_plot, sobol_plot
+from cappe.report.animation import animate_mode_shape, animate_motion
+from cappe.report.plots import (
+    bode_plot,
+    frf_plot,
+    landscape_plot,
+    pole_zero_plot,
+    sobol_plot,
+    stabilization_plot,
+)
 
-__all__ = ["bode_plot", "landscape_plot", "pole_zero_plot", "sobol_plot"]
+__all__ = [
+    "animate_mode_shape",
+    "animate_motion",
+    "bode_plot",
+    "frf_plot",
+    "landscape_plot",
+    "pole_zero_plot",
+    "sobol_plot",
+    "stabilization_plot",
+]
