@@ -1,6 +1,18 @@
-"""File contracts: JSON parameter files, modal data (cappe.modal/1) and atomic writes."""
+"""File contracts: JSON parameter files, modal data (cappe.modal/1), time data and FRFs (UFF 58, CSV, npz), UFF 55
+modes and UFF 15/2411 nodes, all written atomically."""
 
 from cappe.io.files import read_parameters, write_json, write_text
+from cappe.io.measurements import (
+    FRF_NPZ_FORMAT,
+    MEASUREMENT_FORMATS,
+    TIME_NPZ_FORMAT,
+    match_channels,
+    read_frf,
+    read_measurements,
+    read_time_data,
+    write_frf,
+    write_time_data,
+)
 from cappe.io.modal import (
     MODAL_FORMAT,
     ModalData,
@@ -10,17 +22,46 @@ from cappe.io.modal import (
     write_modal_data,
 )
 from cappe.io.timedata import TimeData, check_clipping
+from cappe.io.uff import (
+    UFF_FORMAT,
+    read_uff_frf,
+    read_uff_modal,
+    read_uff_nodes,
+    read_uff_time_data,
+    write_uff_frf,
+    write_uff_modal,
+    write_uff_nodes,
+    write_uff_time_data,
+)
 
 __all__ = [
+    "FRF_NPZ_FORMAT",
+    "MEASUREMENT_FORMATS",
     "MODAL_FORMAT",
+    "TIME_NPZ_FORMAT",
+    "UFF_FORMAT",
     "ModalData",
     "ModalDataSet",
     "TimeData",
     "check_clipping",
+    "match_channels",
     "modal_data_from_mapping",
+    "read_frf",
+    "read_measurements",
     "read_modal_data",
     "read_parameters",
+    "read_time_data",
+    "read_uff_frf",
+    "read_uff_modal",
+    "read_uff_nodes",
+    "read_uff_time_data",
+    "write_frf",
     "write_json",
     "write_modal_data",
     "write_text",
+    "write_time_data",
+    "write_uff_frf",
+    "write_uff_modal",
+    "write_uff_nodes",
+    "write_uff_time_data",
 ]
