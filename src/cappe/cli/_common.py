@@ -119,3 +119,16 @@ def names(value: str | None) -> list[str] | None:
     if value is None:
         return None
     return [v.strip() for v in value.split(",") if v.strip()]
+
+
+def band(value: str, option: str = "--band") -> tuple[float, float]:
+    """Parse ``LO:HI`` (Hz) into a pair of floats."""
+    lo, sep, hi = value.partition(":")
+    try:
+        pair = (float(lo), float(hi))
+    except ValueError:
+        pair = (math.nan, math.nan)
+    if not sep or not all(math.isfinite(v) for v in pair) or not 0 <= pair[0] < pair[1]:
+        msg = f"{option} must look like LO:HI in Hz with 0 <= LO < HI; got {value!r}"
+        raise UsageError(msg)
+    return pair

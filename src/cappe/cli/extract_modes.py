@@ -1,0 +1,94 @@
+"""``cappe extract-modes FRF --band LO:HI``: poles by (poly-reference) LSCF, automatic selection, LSFD shapes."""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import replace
+
+from cappe.cli._common import UsageError, add_output_options, band, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "extract-modes",
+        help="modal parameters from measured FRFs: LSCF stabilization diagram, pole clustering, LSFD mode shapes",
+    )
+    p.add_argument("frf", metavar="FRF", help="FRF file (UFF 58, CSV with re/im pairs, or .npz)")
+    p.add_argument("--band", required=True, metavar="LO:HI", help="frequency band in Hz, e.g. 10:500")
+    p.add_argument("--max-order", type=int, default=40, help="highest model order of the diagram (default 40)")
+    p.add_argument("--n-modes", type=int, help="keep the N best-supported physical poles (default: all found)")
+    p.add_argument("--method", choices=["plscf", "lscf"], default="plscf",
+                   help="poly-reference (default) or common-denominator LSCF")
+    p.add_argument("--near", metavar="HZ,...", help="select the poles nearest these frequencies instead of clustering")
+    p.add_argument("--driving-point", metavar="INPUT=OUTPUT", action="append", default=[],
+                   help="driving-point pair for mass-normalized shapes (repeatable)")
+    p.add_argument("--sensor", metavar="OUTPUT=NODE:DIR", action="append", default=[],
+                   help="label an FRF output as a sensor DOF for the mode shapes, e.g. d1=n1:x (repeatable)")
+    p.add_argument("--uff", metavar="FILE.uff", help="also write the modes as UFF 55 (outputs must be NODE:DIR)")
+    p.add_argument("--plot", metavar="FILE.png", help="stabilization diagram with the selected poles")
+    add_output_options(p)
+    p.set_defaults(func=run)
+
+
+def _pairs(items: list[str], option: str, form: str) -> dict[str, str]:
+    out: dict[str, str] = {}
+    for item in items:
+        key, sep, value = item.partition("=")
+        if not sep or not key.strip() or not value.strip():
+            msg = f"{option} must look like {form}; got {item!r}"
+            raise UsageError(msg)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def run(args: argparse.Namespace) -> int:
+    from cappe.identify import extract_modes
+    from cappe.io import read_frf, write_modal_data, write_uff_modal
+
+    frf = read_frf(args.frf)
+    labels = _pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
+    unknown = sorted(set(labels) - set(frf.output_names))
+    if unknown:
+        msg = f"--sensor names outputs {unknown} that {args.frf} lacks; its outputs are {list(frf.output_names)}"
+        raise UsageError(msg)
+    frf = replace(frf, output_names=tuple(labels.get(name, name) for name in frf.output_names))
+    unlabelled = [name for name in frf.output_names if ":" not in name]
+    if args.uff and unlabelled:
+        msg = (f"--uff needs every FRF output as a NODE:DIR sensor label; label {unlabelled} with "
+               f"--sensor OUTPUT=NODE:DIR (e.g. --sensor {unlabelled[0]}=n1:x)")
+        raise UsageError(msg)
+    lo_hi = band(args.band)
+    near = names(args.near)
+    try:
+        selection: str | list[float] = [float(v) for v in near] if near else "auto"
+    except ValueError as exc:
+        msg = f"--near must be a comma-separated list of frequencies in Hz; got {args.near!r}"
+        raise UsageError(msg) from exc
+    pairs = _pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
+    driving = {inp: labels.get(out, out) for inp, out in pairs.items()}
+    result = extract_modes(
+        frf, band=lo_hi, max_order=args.max_order, n_modes=args.n_modes, method=args.method,
+        selection=selection, driving_points=driving or None,
+    )
+    modal = result.to_modal_data()
+    data = result.to_dict()
+    data = {**data, "band": list(lo_hi), "method": args.method}
+    if args.out:
+        write_modal_data(args.out, modal)
+    if args.uff:
+        write_uff_modal(args.uff, modal)
+        data["uff"] = args.uff
+    if args.plot:
+        from cappe.report import stabilization_plot
+
+        stabilization_plot(result.diagram, args.plot, frf=frf, selected=result.selection)
+        data["plot"] = args.plot
+    lines = [f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
+             f"{args.max_order}):", "   mode   frequency (Hz)   damping (%)   support"]
+    for k, (f, z, n) in enumerate(zip(result.frequency, result.damping, result.selection.support, strict=True)):
+        lines.append(f"  {k + 1:5d}   {f:14.4f}   {100 * z:11.4f}   {n:7d}")
+    if args.out:
+        lines.append(f"wrote {args.out} (cappe.modal/1)")
+    # -o receives the modal data contract (cappe.modal/1), not this summary: print only
+    emit(argparse.Namespace(**{**vars(args), "out": None}), data, "\n".join(lines))
+    return 0
