@@ -2,8 +2,30 @@
 OE, BJ) with order selection and pruning, frequency-domain rational fits, modal extraction (LSCF / LSFD with
 stabilization diagrams) and rigid-body motion reconstruction."""
 
-from cappe.identify._lscf import PoleSelection, StabilizationDiagram, lscf_poles, select_poles, stabilization_diagram
-from cappe.identify._lsfd import ModalExtraction, ModalFit, extract_modes, lsfd
+from cappe.identify._frf import (
+    CoherenceSummary,
+    ForceWindow,
+    Hits,
+    WindowCorrectedModes,
+    coherence_summary,
+    detect_hits,
+    estimate_frf,
+    exponential_window_correction,
+    stepped_sine_frf,
+)
+from cappe.identify._lscf import (
+    PoleSelection,
+    StabilizationDiagram,
+    lscf_poles,
+    select_poles,
+    stabilization_diagram,
+)
+from cappe.identify._lsfd import (
+    ModalExtraction,
+    ModalFit,
+    extract_modes,
+    lsfd,
+)
 from cappe.identify._rigid_body import (
     NINE_ACCELEROMETER_LABELS,
     RIGID_BODY_DOFS,
@@ -20,29 +42,58 @@ from cappe.identify._rigid_body import (
     reconstruct_rigid_body_motion,
     solve_nine_accelerometers,
 )
+from cappe.identify._signals import (
+    SteppedSineSchedule,
+    chirp,
+    impact,
+    prbs,
+    random_noise,
+    sine,
+    square,
+    stepped_sine,
+    stepped_sine_schedule,
+)
 
 __all__ = [
     "NINE_ACCELEROMETER_LABELS",
     "RIGID_BODY_DOFS",
     "AccelerometerLayout",
     "BodyGeometry",
+    "CoherenceSummary",
+    "ForceWindow",
+    "Hits",
+    "ModalExtraction",
+    "ModalFit",
     "MotionConfidence",
+    "PoleSelection",
     "RigidBodyMotion",
+    "StabilizationDiagram",
+    "SteppedSineSchedule",
+    "WindowCorrectedModes",
     "accelerometer_matrix",
     "body_geometry",
+    "chirp",
+    "coherence_summary",
+    "detect_hits",
+    "estimate_frf",
+    "exponential_window_correction",
+    "extract_modes",
+    "impact",
     "integrate_acceleration",
+    "lscf_poles",
+    "lsfd",
     "model_rigid_body_motion",
     "motion_confidence",
     "nine_accelerometer_layout",
+    "prbs",
+    "random_noise",
     "reconstruct_rigid_body_motion",
-    "solve_nine_accelerometers",
-    "ModalExtraction",
-    "ModalFit",
-    "PoleSelection",
-    "StabilizationDiagram",
-    "extract_modes",
-    "lscf_poles",
-    "lsfd",
     "select_poles",
+    "sine",
+    "solve_nine_accelerometers",
+    "square",
     "stabilization_diagram",
+    "stepped_sine",
+    "stepped_sine_frf",
+    "stepped_sine_schedule",
 ]
