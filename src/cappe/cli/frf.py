@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 import warnings
+from typing import Literal
 
 from cappe.cli._common import add_output_options, band, emit
 
@@ -34,7 +35,7 @@ def run(args: argparse.Namespace) -> int:
     from cappe.io import read_time_data, write_frf
 
     data = read_time_data(args.data)
-    exp_window: float | str | None = "auto"
+    exp_window: float | Literal["auto"] | None = "auto"
     if args.exp_window is not None:
         if args.exp_window in ("auto", "none"):
             exp_window = None if args.exp_window == "none" else "auto"
