@@ -26,6 +26,29 @@ from cappe.identify._lsfd import (
     extract_modes,
     lsfd,
 )
+from cappe.identify._order import (
+    OrderSelection,
+    select_order,
+)
+from cappe.identify._polynomial import (
+    ARMAX,
+    ARX,
+    OE,
+    BoxJenkins,
+    DiscreteTransferFunction,
+    ModalParameters,
+    PolynomialModel,
+    modal_parameters_from_poles,
+)
+from cappe.identify._prune import (
+    PrunedModel,
+    PrunedRoot,
+    prune,
+)
+from cappe.identify._rational import (
+    RationalFit,
+    fit_rational,
+)
 from cappe.identify._rigid_body import (
     NINE_ACCELEROMETER_LABELS,
     RIGID_BODY_DOFS,
@@ -55,17 +78,28 @@ from cappe.identify._signals import (
 )
 
 __all__ = [
+    "ARMAX",
+    "ARX",
     "NINE_ACCELEROMETER_LABELS",
+    "OE",
     "RIGID_BODY_DOFS",
     "AccelerometerLayout",
     "BodyGeometry",
+    "BoxJenkins",
     "CoherenceSummary",
+    "DiscreteTransferFunction",
     "ForceWindow",
     "Hits",
     "ModalExtraction",
     "ModalFit",
+    "ModalParameters",
     "MotionConfidence",
+    "OrderSelection",
     "PoleSelection",
+    "PolynomialModel",
+    "PrunedModel",
+    "PrunedRoot",
+    "RationalFit",
     "RigidBodyMotion",
     "StabilizationDiagram",
     "SteppedSineSchedule",
@@ -78,16 +112,20 @@ __all__ = [
     "estimate_frf",
     "exponential_window_correction",
     "extract_modes",
+    "fit_rational",
     "impact",
     "integrate_acceleration",
     "lscf_poles",
     "lsfd",
+    "modal_parameters_from_poles",
     "model_rigid_body_motion",
     "motion_confidence",
     "nine_accelerometer_layout",
     "prbs",
+    "prune",
     "random_noise",
     "reconstruct_rigid_body_motion",
+    "select_order",
     "select_poles",
     "sine",
     "solve_nine_accelerometers",
