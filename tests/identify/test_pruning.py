@@ -196,6 +196,17 @@ def test_each_rule_removes_its_root():
     assert one.removed_by("n_modes")[0].frequency == pytest.approx(120.0, rel=1e-5)
 
 
+def test_unstable_poles_are_removed_and_zeros_in_the_right_half_plane_kept():
+    growing = _pair(300.0, -0.01)  # negative damping inside the band: not a mode of a passive structure
+    rhp_zero = [2 * np.pi * 60.0 * (0.05 + 1j), 2 * np.pi * 60.0 * (0.05 - 1j)]  # non-minimum-phase zero pair
+    res = prune(_zoh_model(rhp_zero, _pair(40.0, 0.02) + growing))
+    assert [r.rule for r in res.removed_poles] == ["unstable"]  # one entry per conjugate pair
+    np.testing.assert_allclose(res.modes.frequency, [40.0], rtol=1e-6)  # exact ZOH pole map, round-off only
+    assert len(res.zeros) == 1  # one entry per conjugate pair
+    assert res.zeros[0].value.real > 0
+    assert abs(res.zeros[0].value) == pytest.approx(2 * np.pi * 60.0 * abs(0.05 + 1j), rel=5e-3)  # matched-z map
+
+
 def test_noise_free_two_mode_model_prunes_to_its_exact_transfer_function():
     poles = _pair(40.0, 0.02) + _pair(120.0, 0.01)
     zeros = _pair(80.0, 0.01)

@@ -32,7 +32,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run)
 
 
-def _signal(kind: str, input_name: str, args: argparse.Namespace, lo_hi: tuple[float, float], seed: int) -> Any:
+def _signal(
+    kind: str, input_name: str, args: argparse.Namespace, lo_hi: tuple[float, float], seed: np.random.Generator
+) -> Any:
     from cappe.identify import chirp, impact, prbs, random_noise, sine, square
 
     fs, duration, amplitude = args.fs, args.duration, args.amplitude
@@ -74,6 +76,8 @@ def run(args: argparse.Namespace) -> int:
     ctx = ModelContext(args)
     system = ctx.system()
     lo_hi = band(args.band) if args.band else (0.0, args.fs / 2.56)
+    # independent random streams for every signal and for the noise (one seed must not correlate them)
+    streams = [np.random.default_rng(child) for child in np.random.SeedSequence(args.seed).spawn(len(args.excite) + 1)]
     channels: dict[str, Any] = {}
     for k, item in enumerate(args.excite):
         input_name, sep, kind = item.partition("=")
@@ -84,11 +88,11 @@ def run(args: argparse.Namespace) -> int:
             known = list(system.input_names)
             msg = f"--excite: {input_name!r} is not an input of {ctx.structure.name}; its inputs: {known}"
             raise UsageError(msg)
-        channels[input_name] = _signal(kind, input_name, args, lo_hi, args.seed + k).channel(input_name)
+        channels[input_name] = _signal(kind, input_name, args, lo_hi, streams[k]).channel(input_name)
     n = min(v.size for v in channels.values())
     excitation = TimeData.from_rate(args.fs, {name: v[:n] for name, v in channels.items()})
     data = time_response(system, excitation, outputs=names(args.outputs), noise=args.noise,
-                         input_noise=args.input_noise, rng=args.seed)
+                         input_noise=args.input_noise, rng=streams[-1])
     summary = {
         "model": ctx.structure.name,
         "fs": data.fs,

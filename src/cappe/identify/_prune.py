@@ -7,6 +7,9 @@ to continuous time and removes them by rules:
 (a) ``"cutoff"``: natural frequency above the anti-alias cut-off (default 0.8 x Nyquist, the usable band of an
     analyzer sampling at 2.56 x its bandwidth); delays (roots at z = 0) and roots on the negative real axis
     (which map to the Nyquist frequency) fall here too.
+(a') ``"unstable"``: poles with a positive real part (negative damping); a passive structure has none, so they are
+    artefacts of the fit (typically at the edge of the excited band, where the input is not persistently exciting).
+    Zeros may lie in the right half-plane (non-collocated FRFs) and are kept.
 (b) ``"cancellation"``: a pole and a zero closer than ``cancel_tol * |pole|`` cancel; pairs are matched one to
     one by least total distance.
 (c) ``"damping"``: complex roots with ``|zeta| > max_damping`` (default 0.3: structural modes of machine tools
@@ -321,6 +324,10 @@ def prune(
     for j, s in enumerate(zeros_s):
         if z_nyq[j] or not np.isfinite(s) or freq(s) > cut:
             z_rule[j] = "cutoff"
+    # (a') unstable poles: not physical for a passive structure
+    for j, s in enumerate(poles_s):
+        if not p_rule[j] and s.real > 0:
+            p_rule[j] = "unstable"
     # (b) cancellation: one-to-one matching of the remaining poles and zeros by relative distance
     if cancel_tol > 0:
         pi = [j for j in range(p_rep.size) if not p_rule[j]]

@@ -6,6 +6,7 @@ from cappe.report.plots import (
     frf_plot,
     landscape_plot,
     pole_zero_plot,
+    pruning_plot,
     sobol_plot,
     stabilization_plot,
 )
@@ -17,6 +18,7 @@ __all__ = [
     "frf_plot",
     "landscape_plot",
     "pole_zero_plot",
+    "pruning_plot",
     "sobol_plot",
     "stabilization_plot",
 ]

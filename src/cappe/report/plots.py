@@ -10,7 +10,8 @@ import numpy as np
 from cappe.systems.frf import FRFData
 from cappe.systems.zpk import ZeroPoleGainModel
 
-__all__ = ["bode_plot", "frf_plot", "landscape_plot", "pole_zero_plot", "sobol_plot", "stabilization_plot"]
+__all__ = ["bode_plot", "frf_plot", "landscape_plot", "pole_zero_plot", "pruning_plot", "sobol_plot",
+           "stabilization_plot"]
 
 
 def _figure(rows: int) -> tuple[Any, Any]:
@@ -143,6 +144,43 @@ def pole_zero_plot(model: ZeroPoleGainModel, path: str | Path, title: str = "") 
     ax.legend(loc="best")
     ax.grid(True, alpha=0.3)
     ax.set_title(title or f"{model.output}/{model.input}")
+    return _save(fig, path)
+
+
+_RULE_MARKERS = {
+    "cutoff": "v", "cancellation": "D", "damping": "s", "real": ">", "min_peak": "^", "n_modes": "^",
+    "with_pole": "d", "properness": "<", "unstable": "*",
+}
+
+
+def pruning_plot(pruned: Any, path: str | Path, title: str = "") -> Path:
+    """Pole-zero map of a pruned high-order model: kept roots bold, removed roots faint and marked by rule.
+
+    ``pruned`` is a :class:`cappe.identify.PrunedModel`; coordinates are continuous-time (rad/s). The unpruned
+    model is the union of kept and removed roots.
+    """
+    fig, ax = _figure(1)
+    removed = list(pruned.removed_poles) + list(pruned.removed_zeros)
+    rules = sorted({r.rule for r in removed})
+    for rule in rules:
+        for kind, face in (("pole", "0.55"), ("zero", "none")):
+            roots = np.array([r.value for r in removed if r.rule == rule and r.kind == kind], dtype=complex)
+            roots = roots[np.isfinite(roots)]  # a root at z = 0 maps to -inf in the s-plane
+            if roots.size:
+                ax.scatter(roots.real, roots.imag, marker=_RULE_MARKERS.get(rule, "."), s=22, facecolors=face,
+                           edgecolors="0.55", linewidths=0.7, label=f"removed {kind}s: {rule}")
+    kept_p = np.array([r.value for r in pruned.poles], dtype=complex)
+    kept_z = np.array([r.value for r in pruned.zeros], dtype=complex)
+    ax.plot(kept_p.real, kept_p.imag, "x", color="tab:red", markersize=10, mew=2, label="kept poles")
+    if kept_z.size:
+        ax.plot(kept_z.real, kept_z.imag, "o", mfc="none", color="tab:blue", markersize=9, mew=2, label="kept zeros")
+    ax.axvline(0, color="0.6", lw=0.8)
+    ax.axhline(0, color="0.6", lw=0.8)
+    ax.set_xlabel("real (rad/s)")
+    ax.set_ylabel("imaginary (rad/s)")
+    ax.legend(loc="best", fontsize=7)
+    ax.grid(True, alpha=0.3)
+    ax.set_title(title or f"pruned model: {kept_p.size} of {kept_p.size + len(pruned.removed_poles)} poles kept")
     return _save(fig, path)
 
 

@@ -1,0 +1,172 @@
+"""``cappe fit DATA --structure arx|armax|oe|bj --order N|auto [--prune N|auto]``: black-box models from time data."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from typing import Any
+
+import numpy as np
+
+from cappe.cli._common import UsageError, add_output_options, emit
+
+STRUCTURES = ("arx", "armax", "oe", "bj")
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "fit",
+        help="black-box model (ARX, ARMAX, OE, BJ) from time data: continuous TF, poles, modes; pruning",
+    )
+    p.add_argument("data", metavar="DATA", help="time data file (UFF 58, CSV with a time column, or .npz)")
+    p.add_argument("--input", nargs="+", required=True, metavar="CH", help="input channel(s)")
+    p.add_argument("--output", required=True, metavar="CH", help="output channel")
+    p.add_argument("--structure", choices=STRUCTURES, default="arx", help="model structure (default arx)")
+    p.add_argument("--order", default="auto",
+                   help="model order n (every polynomial of the structure has order n), or 'auto' (default)")
+    p.add_argument("--criterion", choices=["aic", "bic", "fpe"], default="aic", help="--order auto: criterion")
+    p.add_argument("--max-order", type=int, default=12, help="--order auto: largest candidate order (default 12)")
+    p.add_argument("--nk", type=int, default=1, help="input delay in samples (default 1)")
+    p.add_argument("--prune", metavar="N|auto",
+                   help="prune to N modes (thesis rules, then the N most significant), or 'auto' (rules and a 1 %% "
+                        "peak-significance floor)")
+    p.add_argument("--cutoff", type=float, help="--prune: anti-alias cut-off in Hz (default 0.8 x Nyquist)")
+    p.add_argument("--max-damping", type=float, default=0.3, help="--prune: largest credible damping ratio (0.3)")
+    p.add_argument("--refine", action="store_true",
+                   help="--prune: refit an output-error model of the pruned order (removes ARX noise bias)")
+    p.add_argument("--plot", metavar="FILE.png", help="--prune: pole-zero map of the pruned vs unpruned model")
+    add_output_options(p)
+    p.set_defaults(func=run)
+
+
+def _estimator(structure: str, n: int, nk: int) -> Any:
+    from cappe.identify import ARMAX, ARX, OE, BoxJenkins
+
+    if structure == "arx":
+        return ARX(n, n, nk)
+    if structure == "armax":
+        return ARMAX(n, n, n, nk)
+    if structure == "oe":
+        return OE(n, n, nk)
+    return BoxJenkins(n, n, n, n, nk)
+
+
+def _order(text: str) -> int | None:
+    if text == "auto":
+        return None
+    try:
+        n = int(text)
+    except ValueError:
+        n = 0
+    if n < 1:
+        msg = f"--order must be a positive integer or 'auto'; got {text!r}"
+        raise UsageError(msg)
+    return n
+
+
+def _pairs(values: Any) -> list[list[float]]:
+    v = np.asarray(values, dtype=complex)
+    v = v[np.lexsort((v.imag, np.abs(v)))]
+    return [[float(z.real), float(z.imag)] for z in v]
+
+
+def _fit_quality(model: Any, data: Any) -> dict[str, Any]:
+    """NRMSE fit in % of the simulated output, or of the one-step prediction when the model is unstable."""
+    stable = bool(np.all(np.abs(model.poles()) < 1.0))
+    horizon = float("inf") if stable else 1.0
+    return {"fit_percent": model.fit_percent(data, horizon), "fit_horizon": "simulation" if stable else "one-step",
+            "stable": stable}
+
+
+def run(args: argparse.Namespace) -> int:
+    from cappe.identify import OE, prune, select_order
+    from cappe.io import read_time_data
+
+    n = _order(args.order)
+    prune_to: int | None = None
+    if args.prune is not None and args.prune != "auto":
+        try:
+            prune_to = int(args.prune)
+        except ValueError:
+            prune_to = 0
+        if prune_to < 1:
+            msg = f"--prune must be a positive number of modes or 'auto'; got {args.prune!r}"
+            raise UsageError(msg)
+    if (args.refine or args.plot or args.cutoff is not None) and args.prune is None:
+        msg = "--refine, --plot and --cutoff act on a pruned model; add --prune N or --prune auto"
+        raise UsageError(msg)
+    data = read_time_data(args.data)
+    result: dict[str, Any] = {"format": "cappe.fit/1", "data": args.data, "structure": args.structure}
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if n is None:
+            selection = select_order(data, inputs=args.input, output=args.output, structure=args.structure,
+                                     orders=range(1, args.max_order + 1), nk=args.nk, criterion=args.criterion)
+            model = selection.model
+            result["order_selection"] = selection.to_dict()
+        else:
+            model = _estimator(args.structure, n, args.nk).fit(data, inputs=args.input, output=args.output)
+        result["orders"] = model.get_params()
+        result["success"] = bool(model.success_)
+        result.update(_fit_quality(model, data))
+        result["loss"] = float(model.loss_)
+        tfs, poles, modes = [], model.continuous_poles(), model.modal_parameters()
+        if args.prune is not None:
+            pruned = [
+                prune(model, input=name, n_modes=prune_to, min_peak=0.01 if prune_to is None else None,
+                      cutoff=args.cutoff, max_damping=args.max_damping)
+                for name in args.input
+            ]
+            result["pruning"] = {name: p.to_dict() for name, p in zip(args.input, pruned, strict=True)}
+            tfs = [p.transfer_function for p in pruned]
+            poles = np.array([r.value for r in pruned[0].poles], dtype=complex)
+            modes = pruned[0].modes
+            if args.plot:
+                from cappe.report import pruning_plot
+
+                orders = ", ".join(f"{k}={v}" for k, v in result["orders"].items())
+                pruning_plot(pruned[0], args.plot, f"{args.output}/{args.input[0]}: {args.structure.upper()} "
+                             f"({orders}) pruned to {modes.n_modes} mode(s)")
+                result["plot"] = args.plot
+            if args.refine:
+                order = 2 * modes.n_modes + int(np.sum(np.abs(poles.imag) == 0))
+                refined = OE(order, order, args.nk).fit(data, inputs=args.input, output=args.output)
+                result["refined"] = {"orders": refined.get_params(), "success": bool(refined.success_),
+                                     **_fit_quality(refined, data)}
+                model, modes, poles = refined, refined.modal_parameters(), refined.continuous_poles()
+                tfs = [refined.to_transfer_function(name, negative_real="reflect") for name in args.input]
+        if not tfs:
+            tfs = [model.to_transfer_function(name, negative_real="reflect") for name in args.input]
+    warned = [str(w.message) for w in caught]
+    for message in warned:
+        print(f"cappe: warning: {message}", file=sys.stderr)
+    first = tfs[0].to_dict()
+    result.update(first)
+    result["transfer_functions"] = [tf.to_dict() for tf in tfs]
+    result["poles"] = _pairs(poles)
+    result["modes"] = modes.to_dict()["modes"]
+    result["warnings"] = warned
+    emit(args, result, _text(args, result, modes))
+    return 0
+
+
+def _text(args: argparse.Namespace, result: dict[str, Any], modes: Any) -> str:
+    orders = ", ".join(f"{k}={v}" for k, v in result["orders"].items())
+    lines = [f"{args.structure.upper()} fit of {args.output} from {', '.join(args.input)} ({orders}): "
+             f"{result['fit_percent']:.2f} % fit ({result['fit_horizon']}"
+             f"{'' if result['stable'] else ', the model is unstable'})"]
+    if "pruning" in result:
+        first = result["pruning"][args.input[0]]
+        removed = ", ".join(f"{rule} {count}" for rule, count in first["removed_counts"].items()) or "none"
+        lines.append(f"pruned to {modes.n_modes} mode(s); removed poles and zeros by rule: {removed}")
+    if "refined" in result:
+        refined = result["refined"]
+        lines.append(
+            f"refined by OE {refined['orders']}: {refined['fit_percent']:.2f} % fit ({refined['fit_horizon']})"
+        )
+    lines.append("   mode   frequency (Hz)   damping (%)")
+    for k, (f, z) in enumerate(zip(modes.frequency, modes.damping, strict=True)):
+        lines.append(f"  {k + 1:5d}   {f:14.4f}   {100 * z:11.4f}")
+    lines.append(f"continuous TF {result['output']}/{result['input']}: order {len(result['denominator']) - 1}")
+    return "\n".join(lines)
