@@ -122,3 +122,68 @@ def test_errors_and_exit_codes(capsys, tmp_path, impact_run):
     code, _, err = run(capsys, "extract-modes", tmp_path / "missing.uff", "--band", "20:400")
     assert code == 1
     assert "missing.uff" in err
+
+
+@pytest.fixture
+def random_run(capsys, tmp_path):
+    data = tmp_path / "random.npz"
+    code, _, _ = run(capsys, "simulate", "builtin:two-mass-rig", "--excite", "F1=random", "--excite", "F2=random",
+                     "--fs", 2000, "--duration", 5, "--band", "0:1000", "--outputs", "d1", "--noise", 0.01,
+                     "--seed", 1, "-o", data)
+    assert code == 0
+    return data
+
+
+def test_fit_arx40_pruned_to_the_physical_order(capsys, tmp_path, random_run, rig_modes):
+    plot = tmp_path / "pz.png"
+    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "F2", "--output", "d1", "--structure", "arx",
+                         "--order", 40, "--prune", "auto", "--plot", plot, "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    # same shape as `cappe model tf` at the top level (first input), plus poles and modes
+    assert result["input"] == "F1"
+    assert result["output"] == "d1"
+    assert result["denominator"][0] == 1.0
+    assert len(result["denominator"]) == 5  # the rig's physical order: 2 modes, 4 poles
+    assert [tf["input"] for tf in result["transfer_functions"]] == ["F1", "F2"]
+    assert len(result["poles"]) == 2  # one per conjugate pair
+    np.testing.assert_allclose([m["frequency"] for m in result["modes"]], rig_modes.frequency, rtol=0.005)
+    np.testing.assert_allclose([m["damping"] for m in result["modes"]], rig_modes.damping, rtol=0.05)
+    assert result["pruning"]["F1"]["removed_counts"]
+    assert plot.stat().st_size > 1000
+    # the pruned continuous TF reproduces the model's: compare at the first resonance (within 5 %, noise and
+    # pruning; the resonance peak is the most sensitive point to the damping estimate)
+    from cappe.model import NumericModel, load_model
+
+    s = 2j * np.pi * rig_modes.frequency[1]
+    truth = NumericModel(load_model("builtin:two-mass-rig")).system().frf([rig_modes.frequency[1]], "F1", "d1").H
+    fitted = np.polyval(result["numerator"], s) / np.polyval(result["denominator"], s)
+    assert abs(fitted / truth[0, 0, 0] - 1) < 0.05
+
+
+def test_fit_order_selection_and_refinement(capsys, random_run, rig_modes):
+    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "F2", "--output", "d1", "--structure", "oe",
+                         "--order", "auto", "--max-order", 5, "--criterion", "bic")
+    assert code == 0, err
+    assert "OE fit of d1 from F1, F2 (nb=4, nf=4, nk=1)" in out  # BIC picks the physical order 4
+    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 30, "--prune", 2,
+                         "--refine", "--json")
+    assert code == 0, err
+    result = json.loads(out)
+    assert result["refined"]["orders"] == {"nb": 4, "nf": 4, "nk": 1}
+    np.testing.assert_allclose([m["frequency"] for m in result["modes"]], rig_modes.frequency, rtol=0.005)
+
+
+def test_fit_usage_errors(capsys, random_run):
+    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", "forty")
+    assert code == 2
+    assert "--order must be a positive integer or 'auto'; got 'forty'" in err
+    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 4, "--prune", "x")
+    assert code == 2
+    assert "--prune must be a positive number of modes or 'auto'" in err
+    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 4, "--refine")
+    assert code == 2
+    assert "add --prune N or --prune auto" in err
+    code, _, err = run(capsys, "fit", random_run, "--input", "F7", "--output", "d1", "--order", 4)
+    assert code == 1
+    assert "F7" in err
