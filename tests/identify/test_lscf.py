@@ -362,6 +362,18 @@ def _frf(**kw):
     return FRFData(f, H, ("F",), ("x",), **kw)
 
 
+def test_band_overshooting_by_less_than_one_line_is_clipped_to_the_data():
+    # an FRF estimated for band (20, 200) has lines strictly inside it; the same band must work here
+    freq = np.linspace(20.2, 199.8, 450)
+    s = 2j * np.pi * freq
+    pole = 2 * np.pi * (-0.5 + 80j)
+    h = (1 / (s - pole) + 1 / (s - np.conj(pole)))[None, None, :]
+    clipped = lscf_poles(FRFData(freq, h, ("F",), ("x",)), band=(20.0, 200.0), max_order=4)
+    exact = lscf_poles(FRFData(freq, h, ("F",), ("x",)), band=(20.2, 199.8), max_order=4)
+    assert clipped.band == exact.band == (20.2, 199.8)
+    np.testing.assert_array_equal(clipped.poles, exact.poles)
+
+
 def _diagram():
     return stabilization_diagram(orders=[2, 4], poles=[[-1 + 60j], [-1 + 60j]], band=(1.0, 60.0))
 
@@ -379,6 +391,8 @@ ERRORS = [
     (lambda: lscf_poles(_frf(window_decay=-1.0), band=(1, 50)), r"window_decay .* must be > 0 s; got -1.0"),
     (lambda: lscf_poles(_frf(), band=5.0), r"band must be a pair \(f_lo, f_hi\) in Hz; got 5.0"),
     (lambda: lscf_poles(_frf(), band=(10.0, 150.0)), r"band \(10, 150\) Hz .* data's frequency range \[0, 100\] Hz"),
+    # overshooting the data by more than one line (0.5 Hz here) is an error; less is clipped (see below)
+    (lambda: lscf_poles(_frf(), band=(10.0, 100.6)), r"band \(10, 100.6\) Hz .* data's frequency range"),
     (lambda: lscf_poles(_frf(), band=(60.0, 20.0)), r"band \(60, 20\) Hz must satisfy 0 <= f_lo < f_hi"),
     (lambda: lscf_poles(_bad_nan(), band=(1.0, 90.0)), r"FRF x/F contains NaN or Inf in the band \(first at 25 Hz\)"),
     (lambda: lscf_poles(_frf(), band=(1, 50), reference="left"), r"reference must be 'poly' or 'common'; got 'left'"),

@@ -7,6 +7,8 @@ import sys
 import warnings
 from typing import Literal
 
+import numpy as np
+
 from cappe.cli._common import add_output_options, band, emit
 
 
@@ -73,9 +75,14 @@ def run(args: argparse.Namespace) -> int:
     lines = [
         f"{args.estimator} FRFs of {len(frf.output_names)} output(s) x {len(frf.input_names)} input(s): "
         f"{frf.freq.size} lines, {frf.freq[0]:g}-{frf.freq[-1]:g} Hz, resolution {df:.4g} Hz",
-        f"coherence below {args.coherence_threshold:g} (fraction of lines, minimum at):",
     ]
-    for o, out in enumerate(frf.output_names):
+    single = frf.coherence is not None and bool(np.all(np.abs(frf.coherence - 1.0) < 1e-9))
+    result["single_record"] = single
+    if single:
+        lines.append("coherence is 1 on every line: one record (one hit) has no averaging to judge noise by")
+    else:
+        lines.append(f"coherence below {args.coherence_threshold:g} (fraction of lines, minimum at):")
+    for o, out in enumerate(frf.output_names if not single else ()):
         for i, inp in enumerate(frf.input_names):
             lines.append(
                 f"  {out}/{inp}: {100 * summary.fraction_below[o, i]:.1f} %, min {summary.minimum[o, i]:.3f} "

@@ -84,6 +84,13 @@ def _band_lines(freq: FloatArray, band: Sequence[float]) -> tuple[tuple[float, f
         msg = f"band must be a pair (f_lo, f_hi) in Hz; got {band!r}"
         raise DataError(msg) from exc
     lo, hi = float(freq[0]), float(freq[-1])
+    # a band that overshoots the data by less than one line (the same band given to the FRF estimator, whose
+    # lines fall inside it) is clipped to the data
+    step = float(np.median(np.diff(freq))) if freq.size > 1 else 0.0
+    if lo - step <= f_lo < lo:
+        f_lo = lo
+    if hi < f_hi <= hi + step:
+        f_hi = hi
     if not (np.isfinite(f_lo) and np.isfinite(f_hi)) or f_lo >= f_hi or f_lo < lo or f_hi > hi or f_lo < 0:
         msg = (
             f"band ({f_lo:g}, {f_hi:g}) Hz must satisfy 0 <= f_lo < f_hi and lie inside the data's frequency "
