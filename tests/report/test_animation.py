@@ -128,7 +128,7 @@ def test_animation_errors(tmp_path, plate):
         animate_motion(tmp_path / "m.gif", measured=motion, geometry={"b": [[0.0, 1.0]]})
     with pytest.raises(DataError, match="unknown body 'c'"):
         animate_motion(tmp_path / "m.gif", measured=motion, bodies=["c"])
-    with pytest.raises(DataError, match="argument 'scale' must be a positive finite number; got -1"):
+    with pytest.raises(DataError, match="argument 'scale' must be > 0; got -1"):
         animate_motion(tmp_path / "m.gif", measured=motion, scale=-1.0, n_frames=1, **SMALL)
     modes = plate.system().modes()
     with pytest.raises(DataError, match=r"mode index must be in 0 \.\. 5; got 6"):

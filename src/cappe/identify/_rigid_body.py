@@ -38,6 +38,7 @@ import sympy as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
+from cappe._arguments import is_numeric, positive_number
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
 from cappe.io.timedata import TimeData
 from cappe.model.numeric import NumericModel, ParamsLike
@@ -99,19 +100,11 @@ def _vectors(name: str, value: ArrayLike, *, rows: int | None = None) -> Array:
 
 
 def _point(name: str, value: ArrayLike) -> Array:
-    arr = np.asarray(value, dtype=float) if _is_numeric(value) else None
+    arr = np.asarray(value, dtype=float) if is_numeric(value) else None
     if arr is None or arr.shape != (3,) or not np.all(np.isfinite(arr)):
         msg = f"{name} must be a finite 3-vector [x, y, z] in m; got {value!r}"
         raise DataError(msg)
     return arr
-
-
-def _is_numeric(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 def _unit_directions(name: str, directions: Array, labels: Sequence[str] | None = None) -> Array:
@@ -122,18 +115,6 @@ def _unit_directions(name: str, directions: Array, labels: Sequence[str] | None 
         msg = f"{name}: direction of {which} must be a non-zero 3-vector; got {directions[bad[0]].tolist()}"
         raise DataError(msg)
     return np.asarray(directions / norm[:, None])
-
-
-def _positive_float(name: str, value: Any) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        msg = f"argument {name!r} must be a positive number; got {value!r}"
-        raise DataError(msg) from None
-    if not (math.isfinite(out) and out > 0):
-        msg = f"argument {name!r} must be a positive finite number; got {value!r}"
-        raise DataError(msg)
-    return out
 
 
 def _rms(x: Array, axis: int = -1) -> Array:
@@ -374,7 +355,7 @@ def integrate_acceleration(
     if not np.all(np.isfinite(a)):
         msg = "acceleration contains NaN or Inf"
         raise DataError(msg)
-    rate = _positive_float("fs", fs)
+    rate = positive_number("fs", fs, "Hz")
     low, high = _band_limits(f_min, f_max, rate)
     order = _filter_order(filter_order)
     x = np.moveaxis(a, axis, -1)
@@ -398,13 +379,13 @@ def integrate_acceleration(
 
 
 def _band_limits(f_min: Any, f_max: Any, fs: float) -> tuple[float, float | None]:
-    low = _positive_float("f_min", f_min)
+    low = positive_number("f_min", f_min, "Hz")
     if low >= fs / 2:
         msg = f"argument 'f_min' must be below the Nyquist frequency {fs / 2:g} Hz; got {f_min!r}"
         raise DataError(msg)
     if f_max is None:
         return low, None
-    high = _positive_float("f_max", f_max)
+    high = positive_number("f_max", f_max, "Hz")
     if not low < high <= fs / 2:
         msg = f"argument 'f_max' must satisfy f_min ({low:g} Hz) < f_max <= fs / 2 ({fs / 2:g} Hz); got {f_max!r}"
         raise DataError(msg)

@@ -16,6 +16,7 @@ import numpy as np
 import scipy.signal as sig
 from numpy.typing import ArrayLike, NDArray
 
+from cappe._arguments import is_numeric, positive_number, real_number
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
 from cappe.io.timedata import TimeData
@@ -36,29 +37,9 @@ Array = NDArray[np.float64]
 
 
 # -- validation helpers ------------------------------------------------------------------------------------------
-def _finite(name: str, value: Any) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        msg = f"argument {name!r} must be a real number; got {value!r}"
-        raise DataError(msg) from None
-    if not math.isfinite(out):
-        msg = f"argument {name!r} must be finite; got {value!r}"
-        raise DataError(msg)
-    return out
-
-
-def _positive(name: str, value: Any, unit: str) -> float:
-    out = _finite(name, value)
-    if out <= 0:
-        msg = f"argument {name!r} must be > 0 {unit}; got {value!r}"
-        raise DataError(msg)
-    return out
-
-
 def _below_nyquist(name: str, value: Any, fs: float, *, allow_zero: bool = False) -> float:
     """A frequency in [0, fs/2) (Hz); ``allow_zero=False`` requires > 0."""
-    out = _finite(name, value)
+    out = real_number(name, value)
     if out < 0 or (out == 0 and not allow_zero):
         rule = ">= 0" if allow_zero else "> 0"
         msg = f"argument {name!r} must be {rule} Hz; got {value!r}"
@@ -70,7 +51,7 @@ def _below_nyquist(name: str, value: Any, fs: float, *, allow_zero: bool = False
 
 
 def _n_samples(fs: float, duration: Any) -> int:
-    dur = _positive("duration", duration, "s")
+    dur = positive_number("duration", duration, "s")
     n = int(round(dur * fs))
     if n < 2:
         msg = f"argument 'duration' must span at least 2 samples at fs = {fs:g} Hz; got {dur:g} s"
@@ -121,10 +102,10 @@ def sine(
     >>> round(float(force.values[0].std()), 4)
     7.0711
     """
-    fs = _positive("fs", fs, "Hz")
+    fs = positive_number("fs", fs, "Hz")
     f = _below_nyquist("freq", freq, fs)
-    amp = _finite("amplitude", amplitude)
-    ph = _finite("phase", phase)
+    amp = real_number("amplitude", amplitude)
+    ph = real_number("phase", phase)
     n = _n_samples(fs, duration)
     t = np.arange(n) / fs
     return _signal(amp * np.sin(2 * np.pi * f * t + ph), fs, name, unit)
@@ -151,10 +132,10 @@ def square(
     >>> float((force.values[0] > 0).mean())
     0.25
     """
-    fs = _positive("fs", fs, "Hz")
+    fs = positive_number("fs", fs, "Hz")
     f = _below_nyquist("freq", freq, fs)
-    amp = _finite("amplitude", amplitude)
-    d = _finite("duty", duty)
+    amp = real_number("amplitude", amplitude)
+    d = real_number("duty", duty)
     if not 0.0 <= d <= 1.0:
         msg = f"argument 'duty' must be in [0, 1] (fraction of the period at +amplitude); got {duty!r}"
         raise DataError(msg)
@@ -185,14 +166,14 @@ def chirp(
     >>> sweep.n_samples, abs(float(sweep.values[0, 0])) < 1e-12
     (2000, True)
     """
-    fs = _positive("fs", fs, "Hz")
+    fs = positive_number("fs", fs, "Hz")
     if method not in ("linear", "logarithmic"):
         msg = f"argument 'method' must be 'linear' or 'logarithmic'; got {method!r}"
         raise DataError(msg)
     log = method == "logarithmic"
     start = _below_nyquist("f0", f0, fs, allow_zero=not log)
     stop = _below_nyquist("f1", f1, fs, allow_zero=not log)
-    amp = _finite("amplitude", amplitude)
+    amp = real_number("amplitude", amplitude)
     n = _n_samples(fs, duration)
     t = np.arange(n) / fs
     t_end = n / fs
@@ -287,15 +268,15 @@ def stepped_sine_schedule(
     >>> plan.start.tolist(), plan.n_settle
     ([0.0, 0.5], 200)
     """
-    fs = _positive("fs", fs, "Hz")
-    f = np.atleast_1d(np.asarray(freqs, dtype=float)) if _is_numeric(freqs) else None
+    fs = positive_number("fs", fs, "Hz")
+    f = np.atleast_1d(np.asarray(freqs, dtype=float)) if is_numeric(freqs) else None
     if f is None or f.ndim != 1 or f.size == 0 or not np.all(np.isfinite(f)):
         msg = f"argument 'freqs' must be a non-empty 1-D sequence of finite frequencies in Hz; got {freqs!r}"
         raise DataError(msg)
     for value in f:
         _below_nyquist("freqs", value, fs)
-    dw = _positive("dwell", dwell, "s")
-    st = dw / 2 if settle is None else _finite("settle", settle)
+    dw = positive_number("dwell", dwell, "s")
+    st = dw / 2 if settle is None else real_number("settle", settle)
     if not 0 <= st < dw:
         msg = f"argument 'settle' must be in [0, dwell) = [0, {dw:g}) s; got {st:g} s"
         raise DataError(msg)
@@ -310,14 +291,6 @@ def stepped_sine_schedule(
         )
         raise DataError(msg)
     return SteppedSineSchedule(freq=f, fs=fs, n_dwell=n_dwell, n_settle=n_settle)
-
-
-def _is_numeric(value: Any) -> bool:
-    try:
-        np.asarray(value, dtype=float)
-    except (TypeError, ValueError):
-        return False
-    return True
 
 
 def stepped_sine(
@@ -342,7 +315,7 @@ def stepped_sine(
     1.5
     """
     plan = stepped_sine_schedule(freqs=freqs, fs=fs, dwell=dwell, settle=settle)
-    amp = _finite("amplitude", amplitude)
+    amp = real_number("amplitude", amplitude)
     tau = np.tile(np.arange(plan.n_dwell) / plan.fs, plan.n_steps)
     f = np.repeat(plan.freq, plan.n_dwell)
     return _signal(amp * np.sin(2 * np.pi * f * tau), plan.fs, name, unit)
@@ -402,9 +375,9 @@ def random_noise(
     >>> round(float(np.sqrt(np.mean(force.values[0] ** 2))), 6)
     3.0
     """
-    fs = _positive("fs", fs, "Hz")
+    fs = positive_number("fs", fs, "Hz")
     n = _n_samples(fs, duration)
-    level = _positive("rms", rms, unit)
+    level = positive_number("rms", rms, unit)
     if not isinstance(n_periods, (int, np.integer)) or isinstance(n_periods, bool) or n_periods < 1:
         msg = f"argument 'n_periods' must be an integer >= 1; got {n_periods!r}"
         raise DataError(msg)
@@ -491,8 +464,8 @@ def prbs(
     >>> x.size, float(x.sum())
     (31, 2.0)
     """
-    fs = _positive("fs", fs, "Hz")
-    amp = _finite("amplitude", amplitude)
+    fs = positive_number("fs", fs, "Hz")
+    amp = real_number("amplitude", amplitude)
     if not isinstance(clock_divider, (int, np.integer)) or isinstance(clock_divider, bool) or clock_divider < 1:
         msg = f"argument 'clock_divider' must be an integer >= 1; got {clock_divider!r}"
         raise DataError(msg)
@@ -562,17 +535,17 @@ def impact(
     >>> float(hit.values[0].max()), int((hit.values[0] > 0).sum())
     (200.0, 9)
     """
-    fs = _positive("fs", fs, "Hz")
+    fs = positive_number("fs", fs, "Hz")
     n = _n_samples(fs, duration)
-    amp = _finite("amplitude", amplitude)
-    contact = _positive("contact_time", contact_time, "s")
+    amp = real_number("amplitude", amplitude)
+    contact = positive_number("contact_time", contact_time, "s")
     if contact * fs < 2:
         msg = (
             f"argument 'contact_time' must span at least 2 samples at fs = {fs:g} Hz (>= {2 / fs:g} s); "
             f"got {contact:g} s"
         )
         raise DataError(msg)
-    start = _finite("at", at)
+    start = real_number("at", at)
     if shape not in ("half-sine", "haversine"):
         msg = f"argument 'shape' must be 'half-sine' or 'haversine'; got {shape!r}"
         raise DataError(msg)

@@ -23,6 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.sparse.csgraph import minimum_spanning_tree
 from scipy.spatial.distance import pdist, squareform
 
+from cappe._arguments import positive_number
 from cappe.exceptions import DataError
 from cappe.identify._rigid_body import RIGID_BODY_DOFS, BodyGeometry, RigidBodyMotion, body_geometry
 from cappe.io.files import write_text
@@ -63,18 +64,6 @@ def _positive_int(name: str, value: Any, minimum: int = 1) -> int:
         msg = f"argument {name!r} must be an integer >= {minimum}; got {value!r}"
         raise DataError(msg)
     return int(value)
-
-
-def _positive(name: str, value: Any) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        msg = f"argument {name!r} must be a positive number; got {value!r}"
-        raise DataError(msg) from None
-    if not (np.isfinite(out) and out > 0):
-        msg = f"argument {name!r} must be a positive finite number; got {value!r}"
-        raise DataError(msg)
-    return out
 
 
 def _unique_points(points: Array) -> Array:
@@ -134,7 +123,7 @@ def _render(
     if scale is None:
         magnify = 0.1 * extent / peak if peak > 0 else 1.0
     else:
-        magnify = _positive("scale", scale)
+        magnify = positive_number("scale", scale)
     centre = (lo + hi) / 2
     half = 0.5 * extent + max(0.15 * extent, magnify * peak)
     n_frames = tracks[0].motion.shape[0]
