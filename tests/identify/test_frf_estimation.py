@@ -658,3 +658,13 @@ def test_window_correction_errors_and_warning():
     with pytest.warns(DataWarning, match=r"corrected damping is negative for mode\(s\) \[0\]"):
         out = exponential_window_correction(tau=0.1, poles=[-5.0 + 100j])  # decays slower than the window
     assert out.zeta[0] < 0
+
+
+def test_clipped_channel_warns_by_name():
+    rng = np.random.default_rng(5)
+    force = rng.standard_normal(8192)
+    response = np.convolve(force, np.exp(-np.arange(50) / 10.0), mode="same")
+    limit = 0.6 * np.abs(response).max()
+    data = TimeData.from_rate(1000.0, {"F": force, "acc": np.clip(response, -limit, limit)})
+    with pytest.warns(DataWarning, match=r"look clipped .*'acc'"):
+        estimate_frf(data, inputs=["F"], outputs=["acc"], nperseg=1024)

@@ -15,7 +15,14 @@ import numpy as np
 import pytest
 import scipy.signal as sig
 
-from cappe.exceptions import ConvergenceWarning, DataError, IllConditionedWarning, ModelError, NotFittedError
+from cappe.exceptions import (
+    ConvergenceWarning,
+    DataError,
+    DataWarning,
+    IllConditionedWarning,
+    ModelError,
+    NotFittedError,
+)
 from cappe.identify._order import information_criteria, select_order
 from cappe.identify._polynomial import ARMAX, ARX, OE, BoxJenkins, DiscreteTransferFunction
 from cappe.io.timedata import TimeData
@@ -492,3 +499,13 @@ def test_order_selection_errors():
         select_order(data, inputs="u", output="y", orders=[(1, 2, 3)])
     with pytest.raises(DataError, match=r"orders must list at least one candidate"):
         select_order(data, inputs="u", output="y", orders=[])
+
+
+def test_clipped_output_warns_by_name():
+    rng = np.random.default_rng(6)
+    u = rng.standard_normal(3000)
+    y = sig.lfilter([0, 1.0, 0.5], [1, -1.5, 0.7], u)
+    limit = 0.5 * np.abs(y).max()
+    data = TimeData.from_rate(100.0, {"u": u, "y": np.clip(y, -limit, limit)})
+    with pytest.warns(DataWarning, match=r"look clipped .*'y'"):
+        ARX(2, 2).fit(data, inputs=["u"], output="y")

@@ -82,3 +82,9 @@ def test_clipping_detection():
     expected = 1 - 2 / np.pi * np.arcsin(1 / 1.3)
     assert found["cut"] == pytest.approx(expected, abs=0.01)
     assert check_clipping(data.select(["ok", "const"])) == {}
+    # signals that sit on their extremes by design are not clipping
+    two_level = np.sign(np.sin(2 * np.pi * 7 * t) + 1e-9)
+    hammer = np.zeros(2000)
+    hammer[100:105] = np.sin(np.pi * np.arange(1, 6) / 6)
+    designed = TimeData.from_channels(t, {"prbs_like": two_level, "hammer": hammer})
+    assert check_clipping(designed) == {}

@@ -26,7 +26,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
 from cappe.identify._signals import SteppedSineSchedule
-from cappe.io.timedata import TimeData
+from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.frf import FRFData
 
 __all__ = [
@@ -782,6 +782,7 @@ def estimate_frf(
         raise DataError(msg)
     in_rows = _rows(data, ins, "input")
     out_rows = _rows(data, outs, "output")
+    check_clipping(data.select([*ins, *outs]))
     kinds = {"h1": "H1", "h2": "H2", "hv": "Hv"}
     if not isinstance(estimator, str) or estimator.lower() not in kinds:
         msg = f"argument 'estimator' must be 'H1', 'H2' or 'Hv'; got {estimator!r}"

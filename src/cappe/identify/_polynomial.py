@@ -31,7 +31,7 @@ import scipy.signal as sig
 from numpy.typing import NDArray
 
 from cappe.exceptions import ConvergenceWarning, DataError, IllConditionedWarning, ModelError, NotFittedError
-from cappe.io.timedata import TimeData
+from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.statespace import StateSpaceModel
 from cappe.systems.transfer import TransferFunctionModel, transfer_function
 from cappe.systems.zpk import ZeroPoleGainModel, zpk
@@ -671,6 +671,7 @@ class PolynomialModel:
             raise DataError(msg)
         u = np.array([_channel(data, n, "input") for n in names])
         y = _channel(data, output, "output")
+        check_clipping(data.select([*names, output]))
         o = self._orders(len(names))
         n = y.size
         usable = n - (o.n_lagged if not self._iterative else 0)

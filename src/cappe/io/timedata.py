@@ -199,7 +199,9 @@ def check_clipping(data: TimeData, *, min_run: int = 3, rtol: float = 1e-9) -> d
     """Warn about channels that look clipped (saturated) and return them with their clipped fraction.
 
     A channel is flagged when it stays at its maximum or minimum value for ``min_run`` or more consecutive samples
-    (a saturated amplifier or ADC holds the rail); a smooth signal touches its extremes at isolated samples only.
+    (a saturated amplifier or ADC holds the rail) while at least 10 % of its samples lie strictly between the two
+    extremes; a smooth signal touches its extremes at isolated samples only. Signals that live on their extremes by
+    design - two-level PRBS or square waves, an impact force resting at zero between hits - are not flagged.
 
     Examples
     --------
@@ -216,9 +218,11 @@ def check_clipping(data: TimeData, *, min_run: int = 3, rtol: float = 1e-9) -> d
         span = float(np.ptp(row))
         if span == 0.0:
             continue
+        at_rails = [np.abs(row - rail) <= rtol * span for rail in (row.max(), row.min())]
+        if np.mean(~(at_rails[0] | at_rails[1])) < 0.1:
+            continue  # a two-level or baseline-dominated signal (PRBS, square, resting hammer), not a saturated one
         flagged = np.zeros(row.size, dtype=bool)
-        for rail in (row.max(), row.min()):
-            at = np.abs(row - rail) <= rtol * span
+        for at in at_rails:
             flagged |= at & _runs_at_least(at, min_run)
         if flagged.any():
             clipped[name] = float(flagged.mean())
