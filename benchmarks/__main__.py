@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from benchmarks import bench_matrices, bench_modal, bench_sobol
+from benchmarks import bench_identify, bench_matrices, bench_modal, bench_sobol
 
 
 def main() -> None:
     bench_matrices.main()
     bench_modal.main()
     bench_sobol.main()
+    bench_identify.main()
 
 
 if __name__ == "__main__":
