@@ -1,0 +1,19 @@
+"""Physical parameter estimation: the common estimator API, parameter spaces with bounded transformations,
+the ``cappe.estimate/1`` result, and local uncertainty / identifiability."""
+
+from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
+from cappe.estimate._space import ParameterSpace
+from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
+
+__all__ = [
+    "ESTIMATE_FORMAT",
+    "Estimator",
+    "LocalUncertainty",
+    "ParameterEstimate",
+    "ParameterSpace",
+    "fit_least_squares",
+    "jacobian_uncertainty",
+    "read_estimate",
+    "write_estimate",
+]

@@ -1,0 +1,185 @@
+"""The estimator pattern shared by every method, and the bounded least-squares fit most of them end in.
+
+Every estimator follows scikit-learn's rules (STYLE.md): ``__init__`` stores the model and settings only,
+``fit(data)`` validates and returns ``self``, learned values end in ``_`` (``estimate_``, ``params_``) and reading
+them before ``fit`` raises :class:`~cappe.exceptions.NotFittedError`. The result is a :class:`ParameterEstimate`.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import least_squares
+
+from cappe._rng import RandomLike, as_generator
+from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._space import ParameterSpace
+from cappe.estimate._uncertainty import jacobian_uncertainty
+from cappe.exceptions import ConvergenceWarning, NotFittedError
+from cappe.model import NumericModel, Structure
+
+__all__ = ["Estimator", "fit_least_squares"]
+
+Array = NDArray[np.float64]
+Residuals = Callable[[Array], Array]
+
+
+class Estimator:
+    """Base class: ``Estimator(model, unknowns, bounds=..., start=..., values=..., rng=...).fit(data)``.
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The physical model whose parameters are estimated.
+    unknowns : sequence of str, optional
+        Parameters to estimate (default: those marked ``unknown`` in the model file).
+    bounds : mapping name -> (lower, upper), optional
+        Overrides of the model file's bounds (SI).
+    start : mapping name -> value, optional
+        Start values (default: the model's values).
+    values : mapping name -> value, optional
+        Values of the known parameters, when they differ from the model file.
+    rng : int, Generator or None
+        Seed for every random choice (multi-start points, bootstrap, filters).
+    """
+
+    #: Name written to ``cappe.estimate/1`` files.
+    method: ClassVar[str] = ""
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        unknowns: Sequence[str] | None = None,
+        *,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        start: Mapping[str, float] | None = None,
+        values: Mapping[str, float] | None = None,
+        rng: RandomLike = None,
+    ) -> None:
+        self.model = model
+        self.unknowns = unknowns
+        self.bounds = bounds
+        self.start = start
+        self.values = values
+        self.rng = rng
+
+    # -- the pattern ------------------------------------------------------------------------------------------
+    def fit(self, data: Any) -> Estimator:
+        """Estimate the unknowns from ``data``; the result is ``self.estimate_``."""
+        numeric = self.model if isinstance(self.model, NumericModel) else NumericModel(self.model)
+        space = ParameterSpace.from_model(
+            numeric, self.unknowns, bounds=self.bounds, start=self.start, values=self.values
+        )
+        self.numeric_ = numeric
+        self.space_ = space
+        result = self._fit(numeric, space, data, as_generator(self.rng))
+        if not result.success:
+            warnings.warn(
+                f"{self.method} estimation did not converge: {result.message}", ConvergenceWarning, stacklevel=2
+            )
+        self._estimate = result
+        return self
+
+    def _fit(
+        self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
+    ) -> ParameterEstimate:
+        raise NotImplementedError
+
+    @property
+    def estimate_(self) -> ParameterEstimate:
+        try:
+            return self._estimate
+        except AttributeError:
+            msg = f"{type(self).__name__} is not fitted yet; call fit(data) first"
+            raise NotFittedError(msg) from None
+
+    @property
+    def params_(self) -> dict[str, float]:
+        """``{name: estimate}``."""
+        return self.estimate_.parameters
+
+    def get_params(self) -> dict[str, Any]:
+        return {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
+
+
+def fit_least_squares(
+    method: str,
+    space: ParameterSpace,
+    residuals: Residuals,
+    jacobian: Callable[[Array], Array] | None = None,
+    *,
+    starts: Array | None = None,
+    noise_variance: float | None = None,
+    diagnostics: Mapping[str, Any] | None = None,
+    max_nfev: int | None = None,
+    x_scale: Array | str = "jac",
+) -> ParameterEstimate:
+    """Bounded nonlinear least squares in the space's internal coordinates, with local uncertainty.
+
+    ``residuals(p)`` and ``jacobian(p)`` (``d r / d p``, shape (n_obs, n)) take SI parameter vectors (n,); the
+    search runs in ``u`` (log or scaled, see :class:`ParameterSpace`) with the box bounds handled by the
+    trust-region reflective method, from every row of ``starts`` (SI, default the space's start); the lowest
+    cost wins. The uncertainty comes from the Jacobian at the optimum (:func:`jacobian_uncertainty`).
+    """
+    lo, hi = space.internal_bounds()
+    candidates = np.atleast_2d(space.start if starts is None else np.asarray(starts, dtype=float))
+
+    def fun(u: Array) -> Array:
+        return np.asarray(residuals(space.from_internal(u)), dtype=float)
+
+    jac: Any = "2-point"
+    if jacobian is not None:
+
+        def jac(u: Array) -> Array:  # chain rule: dr/du = dr/dp * dp/du
+            return np.asarray(jacobian(space.from_internal(u)), dtype=float) * space.value_jacobian(u)
+
+    best: Any = None
+    runs: list[dict[str, Any]] = []
+    for p0 in candidates:
+        u0 = np.clip(space.to_internal(p0), lo, hi)
+        try:
+            sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), x_scale=x_scale, max_nfev=max_nfev,
+                                method="trf")
+        except (ValueError, np.linalg.LinAlgError) as exc:
+            runs.append({"start": space.mapping(p0), "success": False, "message": str(exc)})
+            continue
+        runs.append({"start": space.mapping(p0), "cost": float(2 * sol.cost), "success": bool(sol.success),
+                     "evaluations": int(sol.nfev)})
+        if best is None or sol.cost < best.cost:
+            best = sol
+    if best is None:
+        nan = np.full(space.n, np.nan)
+        return ParameterEstimate(
+            method, space.names, nan, nan, np.column_stack([nan, nan]), np.full((space.n, space.n), np.nan),
+            np.zeros(space.n, dtype=bool), (), float("nan"), False, "every start failed: " + str(runs[-1]["message"]),
+            {"runs": runs, **(diagnostics or {})},
+        )
+    p = space.from_internal(best.x)
+    jac_p = best.jac / space.value_jacobian(best.x)  # back to d r / d p in SI
+    unc = jacobian_uncertainty(names=space.names, values=p, jacobian=jac_p, residuals=best.fun,
+                               noise_variance=noise_variance)
+    at_bound = [
+        n for n, a, b, u in zip(space.names, lo, hi, best.x, strict=True) if np.isclose(u, a) or np.isclose(u, b)
+    ]
+    diag: dict[str, Any] = {
+        "iterations": int(best.nfev),
+        "evaluations": sum(int(r.get("evaluations", 0)) for r in runs),
+        "starts": len(candidates),
+        "start": space.mapping(candidates[0]),
+        "bounds": {n: [float(a), float(b)] for n, a, b in zip(space.names, space.lower, space.upper, strict=True)},
+        "at_bound": at_bound,
+        **(diagnostics or {}),
+    }
+    if len(runs) > 1:
+        diag["runs"] = runs
+    success = bool(best.success) and best.status > 0
+    message = str(best.message)
+    if at_bound:
+        message += f"; estimate at a bound for {at_bound}"
+    return ParameterEstimate.from_uncertainty(
+        method, unc, cost=float(2 * best.cost), success=success, message=message, diagnostics=diag
+    )
