@@ -2,12 +2,26 @@
 the ``cappe.estimate/1`` result, and local uncertainty / identifiability."""
 
 from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._resampling import (
+    BootstrapResult,
+    PosteriorSample,
+    Profile,
+    mcmc_posterior,
+    parametric_bootstrap,
+    profile_likelihood,
+)
 from cappe.estimate._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
 
 __all__ = [
     "ESTIMATE_FORMAT",
+    "BootstrapResult",
+    "PosteriorSample",
+    "Profile",
+    "mcmc_posterior",
+    "parametric_bootstrap",
+    "profile_likelihood",
     "Estimator",
     "LocalUncertainty",
     "ParameterEstimate",

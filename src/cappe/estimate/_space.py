@@ -171,6 +171,20 @@ class ParameterSpace:
             raise ModelError(msg)
         return np.array([float(values[n]) for n in self.names])
 
+    def fixing(self, name: str, value: float) -> ParameterSpace:
+        """The space without unknown ``name``, which is held at ``value`` (for profiles and staged fits)."""
+        if name not in self.names:
+            msg = f"{name!r} is not among the unknowns {list(self.names)}"
+            raise ModelError(msg)
+        k = self.names.index(name)
+        keep = [j for j in range(self.n) if j != k]
+        base = self.base.copy()
+        base[self.columns[k]] = float(value)
+        return ParameterSpace(
+            tuple(self.names[j] for j in keep), self.lower[keep], self.upper[keep], self.start[keep], self.log[keep],
+            self.scale[keep], self.columns[keep], base,
+        )
+
     def to_dict(self) -> dict[str, Any]:
         return {
             name: {"lower": float(lo), "upper": float(hi), "start": float(s), "log": bool(lg)}
