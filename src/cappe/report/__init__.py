@@ -3,22 +3,28 @@
 from cappe.report.animation import animate_mode_shape, animate_motion
 from cappe.report.plots import (
     bode_plot,
+    correlation_plot,
     frf_plot,
     landscape_plot,
     pole_zero_plot,
     pruning_plot,
+    response_plot,
     sobol_plot,
     stabilization_plot,
+    trajectory_plot,
 )
 
 __all__ = [
     "animate_mode_shape",
     "animate_motion",
     "bode_plot",
+    "correlation_plot",
     "frf_plot",
     "landscape_plot",
     "pole_zero_plot",
     "pruning_plot",
+    "response_plot",
     "sobol_plot",
     "stabilization_plot",
+    "trajectory_plot",
 ]

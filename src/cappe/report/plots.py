@@ -10,8 +10,18 @@ import numpy as np
 from cappe.systems.frf import FRFData
 from cappe.systems.zpk import ZeroPoleGainModel
 
-__all__ = ["bode_plot", "frf_plot", "landscape_plot", "pole_zero_plot", "pruning_plot", "sobol_plot",
-           "stabilization_plot"]
+__all__ = [
+    "bode_plot",
+    "correlation_plot",
+    "frf_plot",
+    "landscape_plot",
+    "pole_zero_plot",
+    "pruning_plot",
+    "response_plot",
+    "sobol_plot",
+    "stabilization_plot",
+    "trajectory_plot",
+]
 
 
 def _figure(rows: int) -> tuple[Any, Any]:
@@ -181,6 +191,66 @@ def pruning_plot(pruned: Any, path: str | Path, title: str = "") -> Path:
     ax.legend(loc="best", fontsize=7)
     ax.grid(True, alpha=0.3)
     ax.set_title(title or f"pruned model: {kept_p.size} of {kept_p.size + len(pruned.removed_poles)} poles kept")
+    return _save(fig, path)
+
+
+def correlation_plot(estimate: Any, path: str | Path, title: str = "") -> Path:
+    """The correlation matrix of a :class:`cappe.estimate.ParameterEstimate` (non-identifiable entries blank)."""
+    fig, ax = _figure(1)
+    corr = np.asarray(estimate.correlation, dtype=float)
+    image = ax.imshow(np.ma.masked_invalid(corr), cmap="RdBu_r", vmin=-1, vmax=1)
+    fig.colorbar(image, ax=ax, label="correlation")
+    names = list(estimate.names)
+    ax.set_xticks(range(len(names)), names, rotation=45, ha="right", fontsize=8)
+    ax.set_yticks(range(len(names)), names, fontsize=8)
+    for i in range(len(names)):
+        for j in range(len(names)):
+            if np.isfinite(corr[i, j]) and i != j:
+                ax.text(j, i, f"{corr[i, j]:.2f}", ha="center", va="center", fontsize=7)
+    ax.set_title(title or f"{estimate.method}: parameter correlation")
+    return _save(fig, path)
+
+
+def trajectory_plot(
+    time: Any, trajectories: Any, names: Any, path: str | Path, *, truth: Any = None, title: str = ""
+) -> Path:
+    """Parameter estimates over time (e.g. an EKF's), each relative to its final value or to ``truth``."""
+    fig, ax = _figure(1)
+    values = np.asarray(trajectories, dtype=float)
+    ref = np.asarray(truth, dtype=float) if truth is not None else values[-1]
+    for k, name in enumerate(names):
+        ax.plot(time, values[:, k] / ref[k], lw=1, label=name)
+    ax.axhline(1.0, color="0.4", lw=0.8, ls="--")
+    ax.set_xlabel("time (s)")
+    ax.set_ylabel("estimate / truth" if truth is not None else "estimate / final value")
+    ax.legend(loc="best", fontsize=7, ncol=2)
+    ax.grid(True, alpha=0.3)
+    ax.set_title(title or "parameter trajectories")
+    return _save(fig, path)
+
+
+def response_plot(
+    x: Any, measured: Any, before: Any, after: Any, path: str | Path, *, labels: Any, xlabel: str = "time (s)",
+    log: bool = False, title: str = "",
+) -> Path:
+    """Measured response against the model's before and after estimation, one panel per channel.
+
+    ``measured``, ``before`` and ``after`` are (n_channels, n_points) real arrays (magnitudes for FRFs, ``log=True``).
+    """
+    rows = len(labels)
+    fig, axes = _figure(rows)
+    axes = np.atleast_1d(axes)
+    for ax, label, m, b, a in zip(axes, labels, measured, before, after, strict=True):
+        plot = ax.semilogy if log else ax.plot
+        plot(x, m, color="0.3", lw=1.2, label="measured")
+        plot(x, b, color="tab:orange", lw=0.9, ls="--", label="model before")
+        plot(x, a, color="tab:blue", lw=0.9, label="model after")
+        ax.set_ylabel(label)
+        ax.grid(True, alpha=0.3)
+    axes[0].legend(loc="best", fontsize=7)
+    axes[-1].set_xlabel(xlabel)
+    if title:
+        axes[0].set_title(title)
     return _save(fig, path)
 
 
