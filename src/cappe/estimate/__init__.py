@@ -2,6 +2,8 @@
 the ``cappe.estimate/1`` result, and local uncertainty / identifiability."""
 
 from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._hybrid import HybridEstimator
+from cappe.estimate._registry import METHODS, estimator_class
 from cappe.estimate._resampling import (
     BootstrapResult,
     PosteriorSample,
@@ -16,6 +18,9 @@ from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
 
 __all__ = [
     "ESTIMATE_FORMAT",
+    "METHODS",
+    "HybridEstimator",
+    "estimator_class",
     "BootstrapResult",
     "PosteriorSample",
     "Profile",

@@ -1,0 +1,124 @@
+"""``cappe estimate MODEL --data FILE --method M``: physical parameters from measurements, with uncertainty."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import warnings
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    from cappe.estimate._registry import METHODS
+
+    p = sub.add_parser("estimate", help="estimate physical parameters from time data, FRFs or modal data")
+    add_model_options(p)
+    p.add_argument("--data", required=True, metavar="FILE",
+                   help="measurements: UFF 58 / CSV / npz time data or FRFs, or cappe.modal/1 JSON")
+    p.add_argument("--method", required=True, choices=list(METHODS), help="estimation method")
+    p.add_argument("--unknowns", metavar="LIST", help="comma-separated unknowns (default: those marked unknown)")
+    p.add_argument("--bounds", metavar="NAME=LO:HI", action="append", default=[],
+                   help="bounds of an unknown (repeatable; default from the model file)")
+    p.add_argument("--start", metavar="FILE.json", help="start values {name: value}")
+    p.add_argument("--seed", type=int, default=0, help="seed for multi-start points and filters (default 0)")
+    p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
+    p.set_defaults(func=run)
+
+
+def load_data(path: str) -> Any:
+    """Time data, FRFs or modal data by content."""
+    from cappe.io import read_measurements, read_modal_data
+
+    if Path(path).suffix.lower() == ".json":
+        return read_modal_data(path)
+    return read_measurements(path)
+
+
+def _bounds(items: list[str]) -> dict[str, tuple[float, float]]:
+    out: dict[str, tuple[float, float]] = {}
+    for item in items:
+        name, sep, rest = item.partition("=")
+        lo, sep2, hi = rest.partition(":")
+        try:
+            pair = (float(lo), float(hi))
+        except ValueError:
+            pair = None
+        if not sep or not sep2 or not name.strip() or pair is None:
+            msg = f"--bounds must look like NAME=LO:HI; got {item!r}"
+            raise UsageError(msg)
+        out[name.strip()] = pair
+    return out
+
+
+def _kind(data: Any) -> str:
+    from cappe.io import ModalData, TimeData
+    from cappe.systems import FRFData
+
+    if isinstance(data, TimeData):
+        return "time"
+    if isinstance(data, FRFData):
+        return "frf"
+    if isinstance(data, ModalData):
+        return "modal"
+    return type(data).__name__
+
+
+def run(args: argparse.Namespace) -> int:
+    from cappe.estimate._registry import METHODS, estimator_class
+    from cappe.io import read_parameters
+
+    ctx = ModelContext(args)
+    data = load_data(args.data)
+    wanted = METHODS[args.method][2]
+    have = _kind(data)
+    if have != wanted:
+        hint = " (estimate FRFs first with `cappe frf`)" if wanted == "frf" and have == "time" else ""
+        msg = f"method {args.method!r} takes {wanted} data; {args.data} holds {have} data{hint}"
+        raise UsageError(msg)
+    start = read_parameters(args.start) if args.start else None
+    cls = estimator_class(args.method)
+    estimator = cls(ctx.numeric, names(args.unknowns), bounds=_bounds(args.bounds) or None, start=start,
+                    values=ctx.values, rng=args.seed)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = estimator.fit(data).estimate_
+    for w in caught:
+        print(f"cappe: warning: {w.message}", file=sys.stderr)
+    doc = result.to_dict()
+    if args.plot:
+        _plot(result, args.plot)
+        doc["diagnostics"]["plot"] = args.plot
+    emit(args, doc, _text(result, args.method))
+    return 0 if result.success else 1
+
+
+def _plot(result: Any, path: str) -> None:
+    from cappe.report import correlation_plot, trajectory_plot
+
+    trajectory = result.diagnostics.get("trajectory")
+    if trajectory is not None and "time" in trajectory:
+        trajectory_plot(np.asarray(trajectory["time"]), np.asarray(trajectory["values"]), list(result.names), path,
+                        title=f"{result.method}: parameter trajectories")
+    else:
+        correlation_plot(result, path)
+
+
+def _text(result: Any, method: str) -> str:
+    lines = [f"{method}: {'converged' if result.success else 'NOT converged'}"
+             f"{' - ' + result.message if result.message else ''}; cost {result.cost:.4g}",
+             "   parameter          value        std (%)           95 % interval   identifiable"]
+    for k, name in enumerate(result.names):
+        v, s = result.values[k], result.std[k]
+        rel = f"{100 * s / abs(v):10.3g}" if np.isfinite(s) and v != 0 else "         -"
+        lo, hi = result.ci95[k]
+        interval = f"[{lo:.5g}, {hi:.5g}]" if np.isfinite(lo) else "not determined"
+        flag = "yes" if result.identifiable[k] else "NO"
+        lines.append(f"  {name:>10s}  {v:13.6g}  {rel}     {interval:>24s}   {flag}")
+    if result.combinations:
+        lines.append("undetermined combinations (relative changes): " + "; ".join(result.combinations))
+    return "\n".join(lines)
