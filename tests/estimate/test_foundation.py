@@ -138,3 +138,22 @@ def test_result_round_trip_and_nulls(tmp_path):
 def test_estimator_before_fit(two_mass):
     with pytest.raises(NotFittedError, match=r"Estimator is not fitted yet; call fit\(data\) first"):
         _ = Estimator(two_mass).estimate_
+
+
+@pytest.mark.parametrize("strategy", ["multistart", "differential-evolution"])
+def test_global_search_escapes_a_local_minimum(two_mass, strategy):
+    # frequencies of the rig are symmetric-ish in (k11, k22): from a start in the wrong basin a local fit alone
+    # stays there; the global stage finds the basin of the truth (then the local fit polishes it)
+    nm = NumericModel(two_mass)
+    truth = {"k11": 1.1e6, "k22": 0.3e6}
+    target = nm.system(truth).undamped_modes()[0]
+    space = ParameterSpace.from_model(nm, ["k11", "k22"], start={"k11": 0.61e6, "k22": 0.59e6})
+
+    def residuals(p):
+        return nm.system(space.mapping(p)).undamped_modes()[0] / target - 1
+
+    stuck = fit_least_squares("test", space, residuals)  # local only: ends on the bounds, far from the truth
+    assert stuck.cost > 0.1
+    est = fit_least_squares("test", space, residuals, strategy=strategy, rng=1)
+    np.testing.assert_allclose(est.values, [1.1e6, 0.3e6], rtol=1e-6)
+    assert est.diagnostics["global_search"]["strategy"] == strategy

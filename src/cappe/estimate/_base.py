@@ -19,7 +19,7 @@ from cappe._rng import RandomLike, as_generator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import jacobian_uncertainty
-from cappe.exceptions import ConvergenceWarning, NotFittedError
+from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
 __all__ = ["Estimator", "fit_least_squares"]
@@ -117,6 +117,8 @@ def fit_least_squares(
     diagnostics: Mapping[str, Any] | None = None,
     max_nfev: int | None = None,
     x_scale: Array | str = "jac",
+    strategy: str | None = None,
+    rng: RandomLike = None,
 ) -> ParameterEstimate:
     """Bounded nonlinear least squares in the space's internal coordinates, with local uncertainty.
 
@@ -124,9 +126,29 @@ def fit_least_squares(
     search runs in ``u`` (log or scaled, see :class:`ParameterSpace`) with the box bounds handled by the
     trust-region reflective method, from every row of ``starts`` (SI, default the space's start); the lowest
     cost wins. The uncertainty comes from the Jacobian at the optimum (:func:`jacobian_uncertainty`).
+
+    ``strategy`` (``"multistart"``, ``"direct"``, ``"differential-evolution"``, ``"dual-annealing"``) first runs
+    that global search of :func:`cappe.optimize.minimize` over the whole box (seeded by ``rng``); its result joins
+    the starts of the local fit.
     """
     lo, hi = space.internal_bounds()
     candidates = np.atleast_2d(space.start if starts is None else np.asarray(starts, dtype=float))
+    global_diag: dict[str, Any] = {}
+    if strategy is not None:
+        from cappe.optimize import minimize
+
+        if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi))):
+            msg = f"a global search ({strategy}) needs finite bounds for every unknown; got {space.to_dict()}"
+            raise ModelError(msg)
+
+        def squares(u: Array) -> Array:
+            return np.asarray(residuals(space.from_internal(u)), dtype=float)
+
+        u0 = np.clip(space.to_internal(space.start), lo, hi)
+        found = minimize(None, (lo, hi), strategy=strategy, residuals=squares, x0=u0, rng=rng)
+        candidates = np.vstack([space.from_internal(found.x)[None, :], candidates])
+        global_diag = {"global_search": {"strategy": strategy, "cost": float(found.fun),
+                                         "evaluations": int(found.n_evaluations), "success": bool(found.success)}}
 
     def fun(u: Array) -> Array:
         return np.asarray(residuals(space.from_internal(u)), dtype=float)
@@ -172,6 +194,7 @@ def fit_least_squares(
         "start": space.mapping(candidates[0]),
         "bounds": {n: [float(a), float(b)] for n, a, b in zip(space.names, space.lower, space.upper, strict=True)},
         "at_bound": at_bound,
+        **global_diag,
         **(diagnostics or {}),
     }
     if len(runs) > 1:
