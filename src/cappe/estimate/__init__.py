@@ -2,6 +2,7 @@
 the ``cappe.estimate/1`` result, and local uncertainty / identifiability."""
 
 from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._direct import DirectEstimator
 from cappe.estimate._hybrid import HybridEstimator
 from cappe.estimate._registry import METHODS, estimator_class
 from cappe.estimate._resampling import (
@@ -14,12 +15,17 @@ from cappe.estimate._resampling import (
 )
 from cappe.estimate._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
 from cappe.estimate._space import ParameterSpace
+from cappe.estimate._two_step import TwoStepTFEstimator, TwoStepZPKEstimator, model_transfer_functions
 from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
 
 __all__ = [
     "ESTIMATE_FORMAT",
     "METHODS",
+    "DirectEstimator",
     "HybridEstimator",
+    "TwoStepTFEstimator",
+    "TwoStepZPKEstimator",
+    "model_transfer_functions",
     "estimator_class",
     "BootstrapResult",
     "PosteriorSample",

@@ -107,7 +107,9 @@ def jacobian_uncertainty(
     s2 = float(noise_variance) if noise_variance is not None else float(r @ r) / dof
     # relative sensitivities: columns scaled by |p| (by 1 where p = 0) so singular values compare like with like
     scale = np.where(p != 0, np.abs(p), 1.0)
-    _, sv_short, vt = np.linalg.svd(jac * scale, full_matrices=True)
+    # thin SVD (n_p x n_p right factor) when there are enough observations; the full one only when n_obs < n_p,
+    # where the extra right singular vectors are the undetermined directions (never allocate n_obs x n_obs)
+    _, sv_short, vt = np.linalg.svd(jac * scale, full_matrices=n_obs < n_p)
     sv = np.zeros(n_p)
     sv[: sv_short.size] = sv_short  # fewer observations than parameters: the missing singular values are zero
     top = sv[0] if sv[0] > 0 else 0.0

@@ -1,0 +1,626 @@
+"""The "direct" method (thesis 2.2, 3.6.1): the equations of motion as a regression on measured motion and forces.
+
+With the displacements ``q``, velocities ``q'`` and accelerations ``q''`` of every degree of freedom and the forces
+``u`` measured, the equations of motion ``M q'' + (C + G) q' + K q = B u`` hold at every sample and are linear in
+the matrices. cappe models are affine in their coefficients (``K = K0 + sum_j p_j dK/dp_j``, DESIGN §3), so for
+unknowns that enter linearly the equations stack into one linear least-squares problem::
+
+    sum_j p_j (dM_j q'' + dD_j q' + dK_j q) = B u - (M0 q'' + D0 q' + K0 q)       (one row per DOF and sample)
+
+where ``D = C + G`` and ``M0, D0, K0`` hold the known parameters' share. Unknowns that enter non-linearly (e.g. a
+bearing stiffness ``k0 * preload**(1/3)``) are found by Gauss-Newton on the same equation errors
+(a bounded trust-region search with the exact Jacobian from :meth:`NumericModel.matrix_derivatives`).
+
+**Weighting.** The equations of different DOFs carry different forces and noise: a first solve weights each DOF's
+rows by the inverse RMS of its forces at the start values, the final solve by the inverse RMS of its residuals
+(feasible generalized least squares).
+
+**Instrumental variables.** Noise in the measured motion sits inside the regressors, so plain least squares is
+biased (errors in variables; with 1 % noise on lightly damped structures, about 1 % low on masses and stiffnesses,
+because inertia and stiffness forces nearly cancel near resonance and the noise does not). Instruments are
+regressors correlated with the true motion but not with the noise; the estimate is the two-stage least-squares
+solution ``(A^T P A)^-1 A^T P b`` with ``P`` the projection on the instruments:
+
+* ``instruments="model"`` (recommended): the regressors rebuilt from the model's noise-free simulated response to
+  the measured forces at the previous estimate (zero-order hold, start at rest), iterated ``n_iter`` times from the
+  least-squares estimate (the bootstrap IV of Young / Fritzen, thesis Fig. 2.4). Works for any excitation.
+* ``instruments="delayed"``: the measured regressors ``delay`` samples earlier. Cheap, consistent for white
+  measurement noise, but only as good as the correlation of the signals over the delay: with excitation up to the
+  Nyquist frequency the accelerations are nearly white and the instruments are weak (large errors).
+
+**Missing quantities.** The method needs all three quantities of every DOF. Channels are matched to the model's
+outputs by name and mapped to DOFs through their output rows ``S`` (least squares when sensors are redundant).
+Missing quantities raise :class:`DataError` naming the channels to add, unless ``derive_missing=True``: then a
+missing quantity is differentiated from the next lower one (4th-order central differences; the two samples at each
+end are dropped) or integrated from the next higher one (cumulative Simpson rule, then a straight line is removed
+by least squares because the initial displacement / velocity and sensor offsets are unknown). Differentiation
+assumes smooth signals: under zero-order-hold (stepped) forces the acceleration jumps at every sample and a
+difference quotient of the velocity misses it by about ``omega dt`` of the force change. Derived channels have
+correlated errors, so their standard errors are optimistic.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+import scipy.linalg as sla
+from numpy.typing import NDArray
+from scipy import signal, stats
+from scipy.integrate import cumulative_simpson
+from scipy.optimize import least_squares
+
+from cappe._rng import RandomLike
+from cappe.estimate._base import Estimator
+from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._space import ParameterSpace
+from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
+from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError
+from cappe.io.timedata import TimeData
+from cappe.model import NumericModel, Structure
+from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.statespace import StateSpaceModel
+
+__all__ = ["DirectEstimator"]
+
+Array = NDArray[np.float64]
+
+_QUANTITY = {0: "displacement", 1: "velocity", 2: "acceleration"}
+_INSTRUMENTS = (None, "delayed", "model")
+#: Relative agreement of the matrix derivatives at two parameter vectors below which the unknowns enter linearly.
+_AFFINE_RTOL = 1e-9
+
+
+class DirectEstimator(Estimator):
+    """Physical parameters from measured forces, displacements, velocities and accelerations (thesis 3.6.1).
+
+    Parameters
+    ----------
+    model, unknowns, bounds, start, values, rng
+        As for :class:`Estimator`. Bounds do not constrain the linear solution (they are reported when violated
+        and bound the Gauss-Newton search of non-linear unknowns).
+    inputs : sequence of str, optional
+        Model inputs that act during the measurement; each needs a force channel of that name. Default: every
+        model input. Inputs left out are taken as zero.
+    position : mapping, optional
+        Axis positions of the model (default: the model's nominal ones).
+    instruments : {None, "model", "delayed"}
+        Instrumental variables against the noise bias (see the module notes); None for plain least squares.
+    delay : int
+        Delay in samples of the ``"delayed"`` instruments.
+    n_iter : int
+        Iterations of the ``"model"`` instruments.
+    derive_missing : bool
+        Derive missing quantities by differentiation or integration instead of raising :class:`DataError`.
+
+    Attributes
+    ----------
+    estimate_ : ParameterEstimate
+        The result; ``diagnostics`` holds the channels used per quantity, derived quantities, the weights, the
+        instrument iterations and whether the unknowns entered linearly.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> from cappe.systems import time_response
+    >>> from cappe.identify import random_noise
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> f1, f2 = (random_noise(fs=2000.0, duration=0.2, rms=5.0, rng=k, name=n) for k, n in ((1, "F1"), (2, "F2")))
+    >>> force = TimeData(f1.time, np.vstack([f1.values, f2.values]), ("F1", "F2"))
+    >>> data = time_response(nm.system(), force)           # noise-free d, v, a of both masses
+    >>> est = DirectEstimator(nm, ["m1", "k11", "c11"]).fit(data)
+    >>> {k: round(v, 6) for k, v in est.params_.items()}
+    {'m1': 1.39, 'k11': 1380000.0, 'c11': 13.42}
+    """
+
+    method = "direct"
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        unknowns: Sequence[str] | None = None,
+        *,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        start: Mapping[str, float] | None = None,
+        values: Mapping[str, float] | None = None,
+        rng: RandomLike = None,
+        inputs: Sequence[str] | None = None,
+        position: Mapping[str, float] | None = None,
+        instruments: str | None = None,
+        delay: int = 1,
+        n_iter: int = 3,
+        derive_missing: bool = False,
+    ) -> None:
+        super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
+        self.inputs = inputs
+        self.position = position
+        self.instruments = instruments
+        self.delay = delay
+        self.n_iter = n_iter
+        self.derive_missing = derive_missing
+
+    # ------------------------------------------------------------------------------------------------------------
+    def _check_settings(self) -> None:
+        if self.instruments not in _INSTRUMENTS:
+            msg = f"instruments must be None, 'model' or 'delayed'; got {self.instruments!r}"
+            raise DataError(msg)
+        for name, value in (("delay", self.delay), ("n_iter", self.n_iter)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                msg = f"{name} must be an integer >= 1; got {value!r}"
+                raise DataError(msg)
+
+    def _fit(
+        self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
+    ) -> ParameterEstimate:
+        self._check_settings()
+        if not isinstance(data, TimeData):
+            msg = f"the direct method needs TimeData with force and motion channels; got {type(data).__name__}"
+            raise DataError(msg)
+        p0 = space.full(space.start)
+        system = model.system(p0, self.position)
+        if np.any(system.H):
+            msg = (
+                f"model '{system.name}' has hysteretic damping (H != 0), which has no time-domain form; the direct "
+                f"method needs viscous damping (use a frequency-domain method)"
+            )
+            raise ModelError(msg)
+        forces, used_inputs = _forces(system, data, self.inputs)
+        motion, valid, info = _motion(system, data, derive_missing=self.derive_missing)
+        equations = _Equations(model, space, self.position, motion, forces, used_inputs, valid)
+        diagnostics: dict[str, Any] = {
+            "inputs": list(used_inputs),
+            "channels": info["channels"],
+            "derived": info["derived"],
+            "samples": int(valid.sum()),
+            "linear": equations.linear,
+            "instruments": self.instruments,
+        }
+        if equations.linear:
+            return self._fit_linear(space, equations, data, diagnostics)
+        if self.instruments is not None:
+            msg = (
+                f"instruments={self.instruments!r} need unknowns that enter the equations linearly; "
+                f"{list(space.names)} do not (use instruments=None)"
+            )
+            raise DataError(msg)
+        return self._fit_nonlinear(space, equations, diagnostics)
+
+    # -- linear unknowns -------------------------------------------------------------------------------------------
+    def _fit_linear(
+        self, space: ParameterSpace, eq: _Equations, data: TimeData, diagnostics: dict[str, Any]
+    ) -> ParameterEstimate:
+        a, b = eq.regression(eq.motion)  # (n_dof, n_s, n_u), (n_dof, n_s)
+        weights = 1.0 / eq.force_scale(a, b, space.start)
+        theta = _weighted_lstsq(a, b, weights, space.start)
+        weights = _residual_weights(a, b, theta, weights)
+        theta = _weighted_lstsq(a, b, weights, space.start)
+        jac = (a * weights[:, None, None]).reshape(-1, space.n)
+        history: list[dict[str, float]] = [space.mapping(theta)]
+        if self.instruments == "delayed":
+            delay = int(self.delay)
+            if delay >= b.shape[1] - space.n:
+                msg = f"delay = {delay} samples leaves too few of the {b.shape[1]} samples for the instruments"
+                raise DataError(msg)
+            inst = eq.regression(eq.delayed(delay))[0][:, delay:]
+            a, b = a[:, delay:], b[:, delay:]
+            for k in range(2):  # the second pass re-weights the DOFs by their IV residuals
+                if k:
+                    weights = _residual_weights(a, b, theta, weights)
+                theta, jac = _iv_solve(a, b, inst, weights, space.start)
+                history.append(space.mapping(theta))
+        elif self.instruments == "model":
+            for _ in range(int(self.n_iter)):
+                try:
+                    simulated = eq.simulate(theta, data.time)
+                except (ModelError, np.linalg.LinAlgError, ValueError) as exc:
+                    warnings.warn(
+                        f"model instruments stopped: the model cannot be simulated at {space.mapping(theta)} "
+                        f"({exc}); the last estimate is kept",
+                        ConvergenceWarning,
+                        stacklevel=4,
+                    )
+                    break
+                weights = _residual_weights(a, b, theta, weights)
+                theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
+                history.append(space.mapping(theta))
+        residuals = ((b - a @ theta) * weights[:, None]).ravel()
+        unc = _uncertainty(space.names, theta, jac, residuals)
+        diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
+        diagnostics["iterations"] = len(history)
+        if len(history) > 1:
+            diagnostics["history"] = history
+        outside = [
+            n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True) if not lo <= v <= hi
+        ]
+        message = "linear least squares" if self.instruments is None else f"instrumental variables ({self.instruments})"
+        if outside:
+            diagnostics["outside_bounds"] = outside
+            message += f"; estimate outside its bounds for {outside}"
+            warnings.warn(
+                f"direct estimate outside the bounds for {outside}: "
+                f"{ {n: float(theta[space.names.index(n)]) for n in outside} }",
+                DataWarning,
+                stacklevel=4,
+            )
+        success = bool(np.all(np.isfinite(theta)))
+        if not success:
+            message += "; the solution is not finite"
+        return ParameterEstimate.from_uncertainty(
+            self.method, unc, cost=float(residuals @ residuals), success=success, message=message,
+            diagnostics=diagnostics,
+        )
+
+    # -- non-linear unknowns ---------------------------------------------------------------------------------------
+    def _fit_nonlinear(self, space: ParameterSpace, eq: _Equations, diagnostics: dict[str, Any]) -> ParameterEstimate:
+        """Gauss-Newton (bounded trust-region) on the weighted equation errors, in the space's internal coordinates.
+
+        The first pass weights each DOF by the RMS of its equation error at the start, the second by that at the
+        first estimate. (Not :func:`fit_least_squares`: the equation errors number n_dof x n_samples, and the
+        uncertainty is taken through the Jacobian's QR factor.)
+        """
+        lo, hi = space.internal_bounds()
+        first = 1.0 / eq.scale_from_residual(eq.residuals(space.start))
+        u = np.clip(space.to_internal(space.start), lo, hi)
+        weights = first
+        sol: Any = None
+        for k in range(2):
+            if k:
+                weights = 1.0 / eq.scale_from_residual(eq.residuals(space.from_internal(sol.x)), floor=1.0 / first)
+            fun = _flat(eq.residuals, weights)
+            jac = _flat_jac(eq.jacobian, weights)
+            sol = least_squares(
+                lambda x, f=fun: f(space.from_internal(x)),
+                sol.x if sol is not None else u,
+                jac=lambda x, j=jac: j(space.from_internal(x)) * space.value_jacobian(x),
+                bounds=(lo, hi),
+                x_scale="jac",
+                method="trf",
+            )
+        theta = space.from_internal(sol.x)
+        jac_p = _flat_jac(eq.jacobian, weights)(theta)
+        unc = _uncertainty(space.names, theta, jac_p, sol.fun)
+        at_bound = [n for n, a, b, x in zip(space.names, lo, hi, sol.x, strict=True) if np.isclose(x, a) or
+                    np.isclose(x, b)]
+        message = f"Gauss-Newton on the equation errors: {sol.message}"
+        if at_bound:
+            message += f"; estimate at a bound for {at_bound}"
+        diagnostics = {
+            **diagnostics,
+            "iterations": int(sol.nfev),
+            "weights": dict(zip(eq.dofs, weights.tolist(), strict=True)),
+            "at_bound": at_bound,
+            "start": space.mapping(space.start),
+        }
+        return ParameterEstimate.from_uncertainty(
+            self.method, unc, cost=float(sol.fun @ sol.fun), success=bool(sol.success) and sol.status > 0,
+            message=message, diagnostics=diagnostics,
+        )
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# data
+
+
+def _forces(system: Any, data: TimeData, inputs: Sequence[str] | None) -> tuple[Array, tuple[str, ...]]:
+    """Force channels (n_inputs_used, n_samples) of the acting model inputs."""
+    names = tuple(system.input_names) if inputs is None else tuple(inputs)
+    unknown = [n for n in names if n not in system.input_names]
+    if unknown:
+        msg = f"inputs {unknown} are not inputs of model '{system.name}'; its inputs are {list(system.input_names)}"
+        raise DataError(msg)
+    missing = [n for n in names if n not in data.channels]
+    if missing:
+        msg = (
+            f"data lack the force channel(s) {missing} of model input(s) {missing}; channels present: "
+            f"{list(data.channels)} (pass inputs=[...] to name only the inputs that act)"
+        )
+        raise DataError(msg)
+    return np.array([data.channel(n) for n in names], dtype=float), names
+
+
+def _motion(system: Any, data: TimeData, *, derive_missing: bool) -> tuple[Array, NDArray[np.bool_], dict[str, Any]]:
+    """Displacement, velocity and acceleration of every DOF (3, n_dof, n_samples) from the output channels."""
+    n = system.n_dof
+    dofs = list(system.dofs)
+    present: dict[int, list[int]] = {0: [], 1: [], 2: []}
+    for k, (name, quantity) in enumerate(zip(system.output_names, system.output_quantities, strict=True)):
+        order = DERIVATIVE_ORDER.get(quantity)
+        if order is not None and name in data.channels:
+            present[order].append(k)
+    out = np.zeros((3, n, data.n_samples))
+    have: dict[int, bool] = {}
+    channels: dict[str, list[str]] = {}
+    problems: list[str] = []
+    for order in (0, 1, 2):
+        rows = system.S[present[order]] if present[order] else np.zeros((0, n))
+        names = [system.output_names[k] for k in present[order]]
+        channels[_QUANTITY[order]] = names
+        rank = int(np.linalg.matrix_rank(rows)) if rows.size else 0
+        if rank == n:
+            y = np.array([data.channel(c) for c in names])
+            out[order] = np.linalg.lstsq(rows, y, rcond=None)[0]
+            have[order] = True
+            continue
+        have[order] = False
+        if rows.size:
+            null = np.linalg.svd(rows)[2][rank:]
+        else:
+            null = np.eye(n)
+        lost = [dofs[j] for j in range(n) if np.linalg.norm(null[:, j]) > 1e-8]
+        helpers = [
+            system.output_names[k]
+            for k, q in enumerate(system.output_quantities)
+            if DERIVATIVE_ORDER.get(q) == order
+            and k not in present[order]
+            and np.any(np.abs(system.S[k][[dofs.index(d) for d in lost]]) > 0)
+        ]
+        problems.append(
+            f"the {_QUANTITY[order]} of DOF(s) {lost} (channels present: {names}; add model output channel(s) "
+            f"{helpers})"
+        )
+    derived: dict[str, str] = {}
+    valid = {order: np.ones(data.n_samples, dtype=bool) for order in (0, 1, 2)}
+    if problems and not derive_missing:
+        msg = (
+            "the direct method needs the displacement, velocity and acceleration of every DOF; data lack "
+            + "; ".join(problems)
+            + " - or pass derive_missing=True to differentiate / integrate the quantities present"
+        )
+        raise DataError(msg)
+    if problems:
+        if not any(have.values()):
+            msg = (
+                "cannot derive missing quantities: no quantity (displacement, velocity or acceleration) is "
+                "measured for every DOF; data lack " + "; ".join(problems)
+            )
+            raise DataError(msg)
+        dt = data.dt
+        changed = True
+        while changed:
+            changed = False
+            for order in (0, 1, 2):
+                if have[order]:
+                    continue
+                if order > 0 and have[order - 1]:
+                    out[order], valid[order] = _differentiate(out[order - 1], dt, valid[order - 1])
+                    derived[_QUANTITY[order]] = f"differentiated from {_QUANTITY[order - 1]}"
+                elif order < 2 and have[order + 1]:
+                    out[order] = _integrate(out[order + 1], dt)
+                    valid[order] = valid[order + 1].copy()
+                    derived[_QUANTITY[order]] = f"integrated from {_QUANTITY[order + 1]} (straight line removed)"
+                else:
+                    continue
+                have[order] = True
+                changed = True
+    mask = valid[0] & valid[1] & valid[2]
+    return out, mask, {"channels": channels, "derived": derived}
+
+
+def _differentiate(x: Array, dt: float, valid: NDArray[np.bool_]) -> tuple[Array, NDArray[np.bool_]]:
+    """4th-order central difference along the last axis; a sample is valid when its five-point stencil is."""
+    out = np.zeros_like(x)
+    out[..., 2:-2] = (x[..., :-4] - 8.0 * x[..., 1:-3] + 8.0 * x[..., 3:-1] - x[..., 4:]) / (12.0 * dt)
+    ok = np.zeros_like(valid)
+    ok[2:-2] = valid[:-4] & valid[1:-3] & valid[2:-2] & valid[3:-1] & valid[4:]
+    return out, ok
+
+
+def _integrate(x: Array, dt: float) -> Array:
+    """Cumulative Simpson integral along the last axis with a least-squares straight line removed."""
+    return np.asarray(signal.detrend(cumulative_simpson(x, dx=dt, axis=-1, initial=0.0), axis=-1, type="linear"))
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# the equations of motion
+
+
+class _Equations:
+    """``M q'' + D q' + K q - B u`` for the unknowns of a space, with its exact derivatives."""
+
+    def __init__(
+        self,
+        model: NumericModel,
+        space: ParameterSpace,
+        position: Mapping[str, float] | None,
+        motion: Array,
+        forces: Array,
+        inputs: tuple[str, ...],
+        valid: NDArray[np.bool_],
+    ) -> None:
+        self.model = model
+        self.space = space
+        self.position = position
+        self.columns = [model.input_names.index(i) for i in inputs]
+        self.dofs = tuple(model.dofs)
+        self.full_motion = motion
+        self.full_forces = forces
+        self.valid = valid
+        self.motion = motion[..., valid]
+        self.forces = forces[:, valid]
+        self.linear = self._is_linear()
+
+    # matrices at SI unknowns --------------------------------------------------------------------------------------
+    def _matrices(self, p: Array) -> tuple[Array, Array, Array, Array]:
+        full = self.space.full(p)
+        mats = self.model.matrices(full, self.position, names=("M", "C", "G", "K"))
+        b_mat = self.model.io_matrices(full, self.position)[0][:, self.columns]
+        return mats["M"], mats["C"] + mats["G"], mats["K"], b_mat
+
+    def _derivatives(self, p: Array) -> tuple[Array, Array, Array, Array]:
+        full = self.space.full(p)
+        der = self.model.matrix_derivatives(full, self.position, names=("M", "C", "G", "K"))
+        cols = self.space.columns
+        d_b = np.zeros((self.space.n, self.model.n_dof, len(self.columns)))
+        if self._b_varies:
+            for j in range(self.space.n):
+                h = 1e-6 * max(abs(p[j]), 1e-12)
+                hi, lo = p.copy(), p.copy()
+                hi[j] += h
+                lo[j] -= h
+                d_b[j] = (self._matrices(hi)[3] - self._matrices(lo)[3]) / (2 * h)
+        return der["M"][cols], der["C"][cols] + der["G"][cols], der["K"][cols], d_b
+
+    def _is_linear(self) -> bool:
+        s = self.space
+        p1 = s.start
+        # a second, generic point inside the bounds: golden-ratio fractions of each internal interval
+        lo, hi = s.internal_bounds()
+        frac = np.mod(0.5 + 0.618034 * np.arange(1, s.n + 1), 1.0)
+        u1 = s.to_internal(p1)
+        u2 = np.where(np.isfinite(lo) & np.isfinite(hi), lo + frac * (hi - lo), u1 + 0.1 * frac)
+        p2 = s.from_internal(u2)
+        self._b_varies = not np.allclose(self._matrices(p1)[3], self._matrices(p2)[3], rtol=_AFFINE_RTOL, atol=0)
+        if self._b_varies:
+            return False
+        d1, d2 = self._derivatives(p1), self._derivatives(p2)
+        for x, y in zip(d1[:3], d2[:3], strict=True):
+            scale = max(float(np.abs(x).max()), float(np.abs(y).max()), 1e-300)
+            if not np.allclose(x, y, rtol=_AFFINE_RTOL, atol=_AFFINE_RTOL * scale):
+                return False
+        return True
+
+    # linear regression --------------------------------------------------------------------------------------------
+    def regression(self, motion: Array) -> tuple[Array, Array]:
+        """``A`` (n_dof, n_samples, n_unknowns) and ``b`` (n_dof, n_samples) of ``A theta = b`` (linear case)."""
+        p = self.space.start
+        m, d, k, b_mat = self._matrices(p)
+        dm, dd, dk, _ = self._derivatives(p)
+        q, qd, qdd = motion
+        a = (
+            np.einsum("jab,bs->asj", dm, qdd)
+            + np.einsum("jab,bs->asj", dd, qd)
+            + np.einsum("jab,bs->asj", dk, q)
+        )
+        known_m = m - np.einsum("j,jab->ab", p, dm)
+        known_d = d - np.einsum("j,jab->ab", p, dd)
+        known_k = k - np.einsum("j,jab->ab", p, dk)
+        rhs = b_mat @ self.forces - known_m @ qdd - known_d @ qd - known_k @ q
+        return a, rhs
+
+    def delayed(self, delay: int) -> Array:
+        """The measured motion ``delay`` samples earlier (the first ``delay`` samples repeat the first one)."""
+        out = np.empty_like(self.motion)
+        out[..., delay:] = self.motion[..., :-delay]
+        out[..., :delay] = self.motion[..., :1]
+        return out
+
+    def simulate(self, theta: Array, time: Array) -> Array:
+        """Noise-free displacement, velocity and acceleration of the model at ``theta`` driven by the forces."""
+        system = self.model.system(self.space.full(theta), self.position)
+        n = system.n_dof
+        a_mat = system.state_matrix()
+        minv_b = np.linalg.solve(system.M, system.B[:, self.columns])
+        b_ss = np.vstack([np.zeros((n, len(self.columns))), minv_b])
+        c_ss = np.vstack([np.eye(2 * n), a_mat[n:]])
+        d_ss = np.vstack([np.zeros((2 * n, len(self.columns))), minv_b])
+        ss = StateSpaceModel(a_mat, b_ss, c_ss, d_ss)
+        y, _ = ss.simulate(self.full_forces.T, time)
+        out = np.stack([y[:, :n].T, y[:, n : 2 * n].T, y[:, 2 * n :].T])
+        return np.asarray(out[..., self.valid], dtype=float)
+
+    def force_scale(self, a: Array, b: Array, p: Array) -> Array:
+        """RMS of each DOF's forces at ``p`` (a weight scale that does not need a fit)."""
+        forces = np.abs(a * p).sum(axis=2) + np.abs(b)
+        scale = np.sqrt(np.mean(forces**2, axis=1))
+        top = float(scale.max()) if scale.size else 0.0
+        if top <= 0:
+            msg = "the measured forces and motion are all zero; nothing to estimate"
+            raise DataError(msg)
+        return np.asarray(np.maximum(scale, 1e-12 * top), dtype=float)
+
+    # general (non-linear) residuals -------------------------------------------------------------------------------
+    def residuals(self, p: Array) -> Array:
+        m, d, k, b_mat = self._matrices(np.asarray(p, dtype=float))
+        q, qd, qdd = self.motion
+        return np.asarray(m @ qdd + d @ qd + k @ q - b_mat @ self.forces, dtype=float)
+
+    def jacobian(self, p: Array) -> Array:
+        dm, dd, dk, d_b = self._derivatives(np.asarray(p, dtype=float))
+        q, qd, qdd = self.motion
+        return np.asarray(
+            np.einsum("jab,bs->asj", dm, qdd)
+            + np.einsum("jab,bs->asj", dd, qd)
+            + np.einsum("jab,bs->asj", dk, q)
+            - np.einsum("jab,bs->asj", d_b, self.forces),
+            dtype=float,
+        )
+
+    def scale_from_residual(self, r: Array, floor: Array | None = None) -> Array:
+        scale = np.sqrt(np.mean(r**2, axis=1))
+        ref = floor if floor is not None else np.full_like(scale, float(scale.max()) or 1.0)
+        return np.maximum(scale, 1e-12 * ref)
+
+
+def _flat(func: Callable[[Array], Array], weights: Array) -> Callable[[Array], Array]:
+    def wrapped(p: Array) -> Array:
+        return np.asarray((func(p) * weights[:, None]).ravel(), dtype=float)
+
+    return wrapped
+
+
+def _flat_jac(func: Callable[[Array], Array], weights: Array) -> Callable[[Array], Array]:
+    def wrapped(p: Array) -> Array:
+        jac = func(p) * weights[:, None, None]
+        return np.asarray(jac.reshape(-1, jac.shape[-1]), dtype=float)
+
+    return wrapped
+
+
+def _weighted_lstsq(a: Array, b: Array, weights: Array, p0: Array) -> Array:
+    """Least squares of the DOF-weighted, column-scaled regression, as the smallest change from ``p0``.
+
+    For a full-rank regression this is the least-squares solution; directions the data do not determine keep
+    their start values (instead of the arbitrary minimum-norm values).
+    """
+    aw = (a * weights[:, None, None]).reshape(-1, a.shape[-1])
+    bw = (b * weights[:, None]).ravel() - aw @ p0
+    scale = np.linalg.norm(aw, axis=0)
+    scale[scale == 0] = 1.0
+    sol = np.linalg.lstsq(aw / scale, bw, rcond=None)[0]
+    return np.asarray(p0 + sol / scale, dtype=float)
+
+
+def _residual_weights(a: Array, b: Array, theta: Array, weights: Array) -> Array:
+    """Inverse RMS residual per DOF (floored at 1e-12 of the current weighted scale)."""
+    r = b - a @ theta
+    sigma = np.sqrt(np.mean(r**2, axis=1))
+    floor = 1e-12 / weights
+    return np.asarray(1.0 / np.maximum(sigma, floor), dtype=float)
+
+
+def _uncertainty(names: Sequence[str], values: Array, jac: Array, residuals: Array) -> LocalUncertainty:
+    """:func:`jacobian_uncertainty` of a tall regression through its QR factor ``R`` (same ``J^T J``).
+
+    ``jacobian_uncertainty`` takes a full SVD of the Jacobian, whose left factor would be (n_obs, n_obs); the
+    triangular factor carries the same information. The noise variance and the Student-t quantile use the
+    regression's own degrees of freedom ``n_obs - n``.
+    """
+    n_obs, n_p = jac.shape
+    dof = max(n_obs - n_p, 1)
+    s2 = float(residuals @ residuals) / dof
+    r_factor = sla.qr(jac, mode="r")[0][:n_p] if n_obs > n_p else jac
+    unc = jacobian_uncertainty(names=names, values=values, jacobian=r_factor, residuals=np.zeros(r_factor.shape[0]),
+                               noise_variance=s2)
+    t = float(stats.t.ppf(0.975, dof))
+    ci95 = np.column_stack([unc.values - t * unc.std, unc.values + t * unc.std])
+    return replace(unc, ci95=ci95, dof=dof)
+
+
+def _iv_solve(a: Array, b: Array, inst: Array, weights: Array, p0: Array) -> tuple[Array, Array]:
+    """Two-stage least squares ``(A^T P A)^-1 A^T P b`` (smallest change from ``p0``); also ``P A``, the Jacobian
+    for the covariance."""
+    n_u = a.shape[-1]
+    aw = (a * weights[:, None, None]).reshape(-1, n_u)
+    zw = (inst * weights[:, None, None]).reshape(-1, n_u)
+    bw = (b * weights[:, None]).ravel() - aw @ p0
+    scale = np.linalg.norm(zw, axis=0)
+    scale[scale == 0] = 1.0
+    q, _ = sla.qr(zw / scale, mode="economic")
+    projected = q @ (q.T @ aw)
+    cols = np.linalg.norm(projected, axis=0)
+    cols[cols == 0] = 1.0
+    theta = p0 + np.linalg.lstsq(projected / cols, q @ (q.T @ bw), rcond=None)[0] / cols
+    return np.asarray(theta, dtype=float), np.asarray(projected, dtype=float)

@@ -1,0 +1,917 @@
+"""The "two-step" methods (thesis 3.6.2): an experimental transfer function first, then the physical parameters whose
+model transfer function matches it.
+
+**Step 1 - experimental transfer functions.** ``fit(data)`` takes
+
+* :class:`TimeData` with force channels named as model inputs and response channels named as model outputs: for
+  each output an output-error model ``OE`` of the physical order (``nf = 2 n_dof`` per input, every excited input
+  at once, ``nk = 0`` for accelerations) is fitted and converted to continuous time by the exact inverse of the
+  zero-order hold (``identification="oe"``, the default); or the thesis's route, a high-order ``ARX`` pruned to the
+  ``n_dof`` most significant modes (``identification="arx"``, :func:`cappe.identify.prune` without its pole-zero
+  cancellation rule, which would remove the weakly coupled mode of the two-mass rig's G22; zeros are mapped by
+  matched-z, which is approximate, ~1e-6 relative at 2 kHz for the rig);
+* :class:`FRFData`: one rational fit with a common denominator of the physical order (:func:`fit_rational`);
+* :class:`TransferFunctionModel` / :class:`ZeroPoleGainModel` objects (or a sequence of them, a
+  :class:`RationalFit` or :class:`PrunedModel`), used as given.
+
+**Step 2 - matching.** The model's transfer functions at a parameter vector come from the exact polynomial form
+``G(s) = S adj(Z(s)) B / det(Z(s))``, ``Z(s) = M s^2 + (C + G) s + K``: both polynomials are sampled on a circle of
+radius ``rho`` (the geometric mean natural frequency at the start) and their coefficients recovered by an FFT, which
+is exact for polynomials and perfectly conditioned in the scaled variable ``s / rho``. The derivatives with respect to
+the unknowns come the same way from ``d det Z = det Z tr(Z^-1 dZ)`` and ``d Z^-1 = -Z^-1 dZ Z^-1`` with the exact
+``dM, dC, dK`` of the affine model, so the Gauss-Newton Jacobian is exact.
+
+* :class:`TwoStepTFEstimator` compares coefficients by the normalized-square index of thesis eqs 3.98/3.99: the
+  residuals are ``(a_model(p) - a_exp) / a_exp`` for every denominator coefficient below the leading one (monic
+  denominators) and every numerator coefficient of every pair. Coefficients that vanish in the model for all values
+  of the unknowns (structural zeros, e.g. the ``s`` term of ``d2/F1`` when ``c12 = 0`` is known, or terms above the
+  model's numerator degree) are not compared: the identified value there is noise. Identical experimental
+  denominators (a common-denominator fit) are compared once.
+* :class:`TwoStepZPKEstimator` compares poles, zeros and gains (thesis eq. 3.103). Model and experimental roots are
+  paired by the Hungarian assignment on their relative distance ``|l_m - l_e| / |l_e|``; extra experimental roots (far
+  sampling or noise zeros) stay unpaired and are listed in the diagnostics. Each paired root gives the relative
+  errors of its natural frequency ``|l|`` and damping ratio ``-Re(l) / |l|`` (``roots="frequency-damping"``) or
+  the real and imaginary parts of ``(l_m - l_e) / l_e`` (``roots="complex"``); each member of a complex pair is
+  weighted by ``1 / sqrt(2)`` so that a pair counts once. The gain is the low-frequency asymptote ``b_k / a_j``
+  (lowest non-zero numerator and denominator coefficients; the static gain for displacement outputs), robust to
+  far-away spurious zeros that change the leading coefficient a lot.
+
+Every residual can be scaled per pair (``weights={"F1->d1": 2.0}``); by default all weights are 1, so the cost is
+the thesis's normalized-square index. The search runs in log coordinates inside the bounds from the start and
+``n_starts - 1`` scrambled Sobol points (seeded by ``rng``); the lowest cost wins.
+
+**Identifiability.** With one input and the outputs d1, d2 of the two-mass rig (thesis eqs 5.7-5.12), the eight
+compared coefficients of G11 and G21 determine the seven parameters only through a term of a few per cent (``k12``
+enters ``a0`` as ``k12^2 / (m1 m2)`` next to ``(k11 + k12)(k12 + k22) / (m1 m2)``), so noise in ``a0`` is amplified
+about 40 times into ``k12`` and ``m2`` (condition number ~460; with 1 % output noise m2, k12, k22 and c22 came out
+up to 23 % off, all together along that direction). Exciting F2 as well adds G22, whose numerator
+``s^2 / m2 + ...`` fixes m2 directly, and G12 = G21 (reciprocity) a second estimate of ``k12 / (m1 m2)``
+(condition number ~8): excite both inputs. With G11 alone m2 is not determined at all (only ratios such as
+``k12^2 / m2``); the estimate then reports it non-identifiable.
+
+**Uncertainty.** The standard errors come from the Jacobian of the normalized residuals with their variance
+estimated from the residuals themselves (:func:`jacobian_uncertainty`). The identified coefficients or roots do not
+have equal relative precision, so these are a scale, not calibrated intervals (over repeated 1 % noise runs of the
+rig they were within a factor of about 3 of the observed scatter, either way).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import NDArray
+from scipy.optimize import linear_sum_assignment
+from scipy.stats import qmc
+
+from cappe._rng import RandomLike
+from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._space import ParameterSpace
+from cappe.exceptions import DataError, ModelError
+from cappe.io.timedata import TimeData
+from cappe.model import NumericModel, Structure
+from cappe.systems.frf import FRFData
+from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.transfer import TransferFunctionModel
+from cappe.systems.zpk import ZeroPoleGainModel
+
+__all__ = ["TwoStepTFEstimator", "TwoStepZPKEstimator", "model_transfer_functions"]
+
+Array = NDArray[np.float64]
+CArray = NDArray[np.complex128]
+
+#: A scaled coefficient below this fraction of the largest sample of its polynomial is a structural zero when it is
+#: one at three generic parameter vectors (FFT round-off is ~1e-15 of the samples).
+_STRUCTURAL_RTOL = 1e-9
+_IDENTIFICATIONS = ("oe", "arx")
+_ROOT_FORMS = ("frequency-damping", "complex")
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# model transfer-function coefficients
+
+
+@dataclass(frozen=True)
+class _Pair:
+    input: str
+    output: str
+    column: int  # model input index
+    row: int  # model output index
+    order: int  # time-derivative order of the output
+
+    @property
+    def label(self) -> str:
+        return f"{self.input}->{self.output}"
+
+
+class _ModelTF:
+    """Numerator and denominator coefficients of the model's transfer functions and their derivatives."""
+
+    def __init__(
+        self, model: NumericModel, space: ParameterSpace, pairs: Sequence[_Pair], position: Mapping[str, float] | None
+    ) -> None:
+        self.model = model
+        self.space = space
+        self.pairs = tuple(pairs)
+        self.position = position
+        n = model.n_dof
+        self.n = n
+        self.degree = 2 * n
+        self.n_points = 4 * n + 4
+        mats = model.matrices(space.full(space.start), position)
+        if np.any(mats["H"]):
+            msg = (
+                f"model '{model.structure.name}' has hysteretic damping (H != 0): its transfer functions are not "
+                f"rational in s; the two-step methods need viscous damping"
+            )
+            raise ModelError(msg)
+        try:
+            lam = np.linalg.eigvals(np.linalg.solve(mats["M"], mats["K"])).real
+        except np.linalg.LinAlgError as exc:
+            msg = f"model '{model.structure.name}' has a singular mass matrix at the start values"
+            raise ModelError(msg) from exc
+        positive = lam[lam > 0]
+        self.rho = float(np.exp(np.mean(np.log(np.sqrt(positive))))) if positive.size else 1.0
+        j = np.arange(self.n_points)
+        self.x = np.exp(1j * np.pi * (2 * j + 1) / self.n_points)  # unit circle, off the real and imaginary axes
+        self.s = self.rho * self.x
+        self.shift = np.exp(-1j * np.pi * np.arange(self.n_points) / self.n_points)
+        self.analytic = self._io_constant()
+        self.num_mask, self.den_mask = self._structure()
+
+    def _io_constant(self) -> bool:
+        lo, hi = self.space.internal_bounds()
+        u = self.space.to_internal(self.space.start)
+        u2 = np.where(np.isfinite(lo) & np.isfinite(hi), 0.5 * (lo + hi), u + 0.1)
+        b1, s1 = self.model.io_matrices(self.space.full(self.space.start), self.position)
+        b2, s2 = self.model.io_matrices(self.space.full(self.space.from_internal(u2)), self.position)
+        return bool(np.array_equal(b1, b2) and np.array_equal(s1, s2))
+
+    def _coefficients(self, values: CArray) -> CArray:
+        """Scaled coefficients (..., degree + 1), ascending powers of s / rho, of polynomials sampled at ``self.s``."""
+        c = np.fft.fft(values, axis=-1) / self.n_points * self.shift
+        return np.asarray(c[..., : self.degree + 1], dtype=complex)
+
+    def raw(self, p: Array, derivatives: bool = False) -> tuple[Array, Array, Array | None, Array | None, Array, Array]:
+        """Scaled, un-normalized coefficients: num (n_pairs, d+1), den (d+1,), their derivatives (..., n_unknowns),
+        and the magnitude of the samples of each polynomial (for the structural-zero test)."""
+        full = self.space.full(np.asarray(p, dtype=float))
+        mats = self.model.matrices(full, self.position, names=("M", "C", "G", "K"))
+        m, d, k = mats["M"], mats["C"] + mats["G"], mats["K"]
+        b_mat, s_mat = self.model.io_matrices(full, self.position)
+        s = self.s
+        z = m[None] * (s**2)[:, None, None] + d[None] * s[:, None, None] + k[None]
+        zinv = np.linalg.inv(z)
+        det = np.linalg.det(z)
+        cols = np.array([pr.column for pr in self.pairs])
+        rows = np.array([pr.row for pr in self.pairs])
+        orders = np.array([pr.order for pr in self.pairs])
+        u = np.einsum("fab,bp->fap", zinv, b_mat[:, cols])  # Z^-1 b per pair (n_f, n, n_pairs)
+        w = np.einsum("pa,fab->fpb", s_mat[rows], zinv)  # s^T Z^-1 per pair (n_f, n_pairs, n)
+        powers = s[:, None] ** orders[None, :]
+        g = np.einsum("pa,fap->fp", s_mat[rows], u) * powers  # s^T Z^-1 b s^order (n_f, n_pairs)
+        num_samples = (det[:, None] * g).T  # (n_pairs, n_f)
+        num = self._coefficients(num_samples).real
+        den = self._coefficients(det).real
+        num_scale = np.abs(num_samples).max(axis=1)
+        den_scale = np.array([np.abs(det).max()])
+        if not derivatives:
+            return num, den, None, None, num_scale, den_scale
+        der = self.model.matrix_derivatives(full, self.position, names=("M", "C", "G", "K"))
+        c_idx = self.space.columns
+        dm, dd, dk = der["M"][c_idx], der["C"][c_idx] + der["G"][c_idx], der["K"][c_idx]
+        dz = (
+            dm[None] * (s**2)[:, None, None, None] + dd[None] * s[:, None, None, None] + dk[None]
+        )  # (n_f, n_u, n, n)
+        ddet = det[:, None] * np.einsum("fab,fjba->fj", zinv, dz)  # (n_f, n_u)
+        dg = -np.einsum("fpa,fjab,fbp->fpj", w, dz, u) * powers[:, :, None]  # (n_f, n_pairs, n_u)
+        dnum_samples = ddet[:, None, :] * g[:, :, None] + det[:, None, None] * dg
+        dnum = self._coefficients(np.moveaxis(dnum_samples, 0, -1)).real  # (n_pairs, n_u, d+1)
+        dden = self._coefficients(ddet.T).real  # (n_u, d+1)
+        return num, den, np.moveaxis(dnum, 1, 2), dden.T, num_scale, den_scale
+
+    def _structure(self) -> tuple[NDArray[np.bool_], NDArray[np.bool_]]:
+        """Coefficients that are non-zero for generic values of the unknowns (checked at three vectors)."""
+        sp = self.space
+        lo, hi = sp.internal_bounds()
+        u0 = sp.to_internal(sp.start)
+        num_mask = np.zeros((len(self.pairs), self.degree + 1), dtype=bool)
+        den_mask = np.zeros(self.degree + 1, dtype=bool)
+        for shift in (0.0, 0.618034, 0.381966):
+            frac = np.mod(shift + 0.7548777 * np.arange(1, sp.n + 1), 1.0)
+            u = np.where(np.isfinite(lo) & np.isfinite(hi), lo + frac * (hi - lo), u0 * (1 + 0.1 * frac))
+            p = sp.start if shift == 0.0 else sp.from_internal(u)
+            num, den, _, _, n_scale, d_scale = self.raw(p)
+            num_mask |= np.abs(num) > _STRUCTURAL_RTOL * n_scale[:, None]
+            den_mask |= np.abs(den) > _STRUCTURAL_RTOL * d_scale
+        if not den_mask[-1]:
+            msg = f"model '{self.model.structure.name}' has a singular mass matrix; its transfer functions are improper"
+            raise ModelError(msg)
+        return num_mask, den_mask
+
+    def evaluate(self, p: Array, derivatives: bool = False) -> tuple[Array, Array, Array | None, Array | None]:
+        """Coefficients in SI (ascending powers of s, monic denominator) and their derivatives (..., n_unknowns)."""
+        num, den, dnum, dden, _, _ = self.raw(p, derivatives)
+        unscale = self.rho ** -np.arange(self.degree + 1, dtype=float)
+        num_u, den_u = num * unscale, den * unscale
+        lead = den_u[-1]
+        num_si, den_si = num_u / lead, den_u / lead
+        if dnum is None or dden is None:
+            return num_si, den_si, None, None
+        dnum_u, dden_u = dnum * unscale[None, :, None], dden * unscale[:, None]
+        dlead = dden_u[-1]
+        dnum_si = dnum_u / lead - num_u[:, :, None] * dlead / lead**2
+        dden_si = dden_u / lead - den_u[:, None] * dlead / lead**2
+        return num_si, den_si, dnum_si, dden_si
+
+
+def model_transfer_functions(
+    model: NumericModel | Structure,
+    pairs: Sequence[tuple[str, str]],
+    params: Mapping[str, float] | None = None,
+    *,
+    unknowns: Sequence[str] | None = None,
+    position: Mapping[str, float] | None = None,
+) -> tuple[TransferFunctionModel, ...]:
+    """Transfer functions of a model from the exact polynomial form ``S adj(Z) B / det(Z)`` (no pole-zero cancellation).
+
+    Structural zeros (coefficients that vanish for all values of ``unknowns``, by default the parameters marked
+    unknown in the model) are exact zeros; leading ones are dropped.
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+    pairs : sequence of (input, output)
+        Model input and output names.
+    params : mapping, optional
+        Parameter overrides (SI).
+    unknowns : sequence of str, optional
+        The parameters that may vary (for the structural zeros).
+    position : mapping, optional
+        Axis positions.
+
+    Returns
+    -------
+    tuple of TransferFunctionModel
+        One per pair, monic denominator of degree ``2 n_dof``.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> (g11,) = model_transfer_functions(load_model("builtin:two-mass-rig"), [("F1", "d1")])
+    >>> [round(c, 6) for c in g11.numerator]     # 1/m1, c22/(m1 m2), (k12 + k22)/(m1 m2): eq. 5.8 with b2 = 1/m1
+    [0.719424, 0.310211, 237608.078675]
+    """
+    nm = model if isinstance(model, NumericModel) else NumericModel(model)
+    space = ParameterSpace.from_model(nm, unknowns, values=params)
+    resolved = _pairs(nm, pairs)
+    engine = _ModelTF(nm, space, resolved, position)
+    num, den, _, _ = engine.evaluate(space.start)
+    out = []
+    for k, pair in enumerate(resolved):
+        coef = np.where(engine.num_mask[k], num[k], 0.0)
+        top = int(np.flatnonzero(engine.num_mask[k]).max()) if engine.num_mask[k].any() else 0
+        d_coef = np.where(engine.den_mask, den, 0.0)
+        out.append(
+            TransferFunctionModel(
+                tuple(float(c) for c in coef[: top + 1][::-1]), tuple(float(c) for c in d_coef[::-1]), pair.input,
+                pair.output,
+            )
+        )
+    return tuple(out)
+
+
+def _pairs(model: NumericModel, pairs: Sequence[Any]) -> list[_Pair]:
+    out = []
+    for item in pairs:
+        if not (isinstance(item, (tuple, list)) and len(item) == 2):
+            msg = f"each pair must be (input, output); got {item!r}"
+            raise DataError(msg)
+        inp, outp = item
+        if inp not in model.input_names:
+            msg = f"pair {inp}->{outp}: {inp!r} is not an input of model '{model.structure.name}'; its inputs are " \
+                  f"{list(model.input_names)}"
+            raise DataError(msg)
+        if outp not in model.output_names:
+            msg = f"pair {inp}->{outp}: {outp!r} is not an output of model '{model.structure.name}'; its outputs " \
+                  f"are {list(model.output_names)}"
+            raise DataError(msg)
+        row = model.output_names.index(outp)
+        order = DERIVATIVE_ORDER.get(model.output_quantities[row])
+        if order is None:
+            msg = f"pair {inp}->{outp}: output quantity {model.output_quantities[row]!r} has no transfer function"
+            raise DataError(msg)
+        out.append(_Pair(inp, outp, model.input_names.index(inp), row, order))
+    labels = [p.label for p in out]
+    repeated = sorted({x for x in labels if labels.count(x) > 1})
+    if repeated:
+        msg = f"pairs must be listed once each; repeated: {repeated}"
+        raise DataError(msg)
+    if not out:
+        msg = "no input/output pairs to compare"
+        raise DataError(msg)
+    return out
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# step 1: experimental transfer functions
+
+
+def _coefficients_of(tf: TransferFunctionModel) -> tuple[Array, Array]:
+    """Ascending, monic float coefficients."""
+    num, den = tf.float_coefficients()
+    den = np.trim_zeros(den, "f")
+    if den.size == 0 or not np.all(np.isfinite(num)) or not np.all(np.isfinite(den)):
+        msg = f"transfer function {tf.input}->{tf.output} has no denominator or non-finite coefficients"
+        raise DataError(msg)
+    return num[::-1] / den[0], den[::-1] / den[0]
+
+
+def _as_tf(item: Any) -> TransferFunctionModel:
+    if isinstance(item, TransferFunctionModel):
+        return item
+    if isinstance(item, ZeroPoleGainModel):
+        num = np.real_if_close(item.gain * np.poly(item.zeros)) if item.zeros.size else np.array([item.gain])
+        den = np.real_if_close(np.poly(item.poles))
+        return TransferFunctionModel(
+            tuple(float(np.real(c)) for c in np.atleast_1d(num)), tuple(float(np.real(c)) for c in den), item.input,
+            item.output,
+        )
+    msg = f"expected TransferFunctionModel or ZeroPoleGainModel; got {type(item).__name__}"
+    raise DataError(msg)
+
+
+def _given_tfs(data: Any) -> list[TransferFunctionModel] | None:
+    """Transfer functions handed over directly (None when ``data`` is something else)."""
+    from cappe.identify._prune import PrunedModel
+    from cappe.identify._rational import RationalFit
+
+    if isinstance(data, (TransferFunctionModel, ZeroPoleGainModel)):
+        return [_as_tf(data)]
+    if isinstance(data, RationalFit):
+        return list(data.transfer_functions)
+    if isinstance(data, PrunedModel):
+        return [data.transfer_function]
+    if isinstance(data, (list, tuple)) and data and all(
+        isinstance(x, (TransferFunctionModel, ZeroPoleGainModel, PrunedModel)) for x in data
+    ):
+        return [x.transfer_function if isinstance(x, PrunedModel) else _as_tf(x) for x in data]
+    return None
+
+
+def _experimental(
+    est: _TwoStep, model: NumericModel, data: Any
+) -> tuple[list[_Pair], list[TransferFunctionModel], str]:
+    """Step 1: experimental transfer functions of the chosen pairs, and how they were obtained."""
+    given = _given_tfs(data)
+    if given is not None:
+        available = [(tf.input, tf.output) for tf in given]
+        wanted = list(est.pairs) if est.pairs is not None else available
+        pairs = _pairs(model, list(wanted))
+        by_label = {f"{tf.input}->{tf.output}": tf for tf in given}
+        missing = [p.label for p in pairs if p.label not in by_label]
+        if missing:
+            msg = f"no experimental transfer function given for pair(s) {missing}; given: {sorted(by_label)}"
+            raise DataError(msg)
+        return pairs, [by_label[p.label] for p in pairs], "given"
+    if isinstance(data, FRFData):
+        return _from_frf(est, model, data)
+    if isinstance(data, TimeData):
+        return _from_time(est, model, data)
+    msg = (
+        f"two-step estimation takes TimeData, FRFData or transfer functions (TransferFunctionModel / "
+        f"ZeroPoleGainModel, a sequence of them, a RationalFit or PrunedModel); got {type(data).__name__}"
+    )
+    raise DataError(msg)
+
+
+def _default_pairs(est: _TwoStep, model: NumericModel, inputs: Sequence[str], outputs: Sequence[str],
+                   where: str) -> list[_Pair]:
+    ins = [i for i in model.input_names if i in inputs]
+    outs = [o for o in model.output_names if o in outputs]
+    if not ins:
+        msg = f"{where} has no channel named after a model input {list(model.input_names)}; channels: {list(inputs)}"
+        raise DataError(msg)
+    if not outs:
+        msg = (
+            f"{where} has no channel named after a model output {list(model.output_names)}; channels: "
+            f"{list(outputs)}"
+        )
+        raise DataError(msg)
+    wanted = list(est.pairs) if est.pairs is not None else [(i, o) for o in outs for i in ins]
+    pairs = _pairs(model, list(wanted))
+    for p in pairs:
+        lacking = [c for c in (p.input, p.output) if c not in (*inputs, *outputs)]
+        if lacking:
+            msg = (
+                f"pair {p.label} needs channel(s) {lacking}, which {where} lacks; channels: "
+                f"{sorted({*inputs, *outputs})}"
+            )
+            raise DataError(msg)
+    return pairs
+
+
+def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> tuple[list[_Pair], list[TransferFunctionModel],
+                                                                             str]:
+    from cappe.identify._polynomial import ARX, OE
+    from cappe.identify._prune import prune
+
+    pairs = _default_pairs(est, model, data.channels, data.channels, "the time data")
+    inputs = [i for i in model.input_names if i in data.channels]  # every excited input enters each output's model
+    n = 2 * model.n_dof
+    tfs: dict[str, TransferFunctionModel] = {}
+    for output in dict.fromkeys(p.output for p in pairs):
+        order = next(p.order for p in pairs if p.output == output)
+        nk = 0 if order == 2 else 1
+        if est.identification == "oe":
+            nb = n + 1 if nk == 0 else n
+            oe = OE(nb=[nb] * len(inputs), nf=[n] * len(inputs), nk=[nk] * len(inputs)).fit(
+                data, inputs=inputs, output=output
+            )
+            for p in pairs:
+                if p.output == output:
+                    tfs[p.label] = oe.to_transfer_function(p.input, negative_real="reflect")
+        else:
+            na = int(est.arx_order)
+            arx = ARX(na, [na] * len(inputs), [nk] * len(inputs)).fit(data, inputs=inputs, output=output)
+            for p in pairs:
+                if p.output == output:
+                    pruned = prune(arx, input=p.input, n_modes=model.n_dof, keep_real=order > 0, cancel_tol=0.0)
+                    tfs[p.label] = pruned.transfer_function
+    return pairs, [tfs[p.label] for p in pairs], f"{est.identification} (time data)"
+
+
+def _from_frf(est: _TwoStep, model: NumericModel, frf: FRFData) -> tuple[list[_Pair], list[TransferFunctionModel], str]:
+    from cappe.identify._rational import fit_rational
+
+    pairs = _default_pairs(est, model, frf.input_names, frf.output_names, "the FRF data")
+    ins = list(dict.fromkeys(p.input for p in pairs))
+    outs = list(dict.fromkeys(p.output for p in pairs))
+    h = frf.H[[frf.output_names.index(o) for o in outs]][:, [frf.input_names.index(i) for i in ins]]
+    keep = np.all(np.isfinite(h), axis=(0, 1)) & (frf.freq > 0)
+    if est.band is not None:
+        keep &= (frf.freq >= est.band[0]) & (frf.freq <= est.band[1])
+    sub = FRFData(frf.freq[keep], h[..., keep], tuple(ins), tuple(outs))
+    n = 2 * model.n_dof
+    n_num = min(n, n - 2 + max(p.order for p in pairs))
+    fit = fit_rational(sub, order=(n_num, n))
+    return pairs, [fit.transfer_function(p.output, p.input) for p in pairs], "fit_rational (FRF data)"
+
+
+# ---------------------------------------------------------------------------------------------------------------
+# estimators
+
+
+class _TwoStep(Estimator):
+    """Shared settings and step 1 of the two-step estimators."""
+
+    method: ClassVar[str] = ""
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        unknowns: Sequence[str] | None = None,
+        *,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        start: Mapping[str, float] | None = None,
+        values: Mapping[str, float] | None = None,
+        rng: RandomLike = None,
+        pairs: Sequence[tuple[str, str]] | None = None,
+        position: Mapping[str, float] | None = None,
+        identification: str = "oe",
+        arx_order: int = 40,
+        band: tuple[float, float] | None = None,
+        weights: Mapping[str, float] | None = None,
+        n_starts: int = 16,
+    ) -> None:
+        super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
+        self.pairs = pairs
+        self.position = position
+        self.identification = identification
+        self.arx_order = arx_order
+        self.band = band
+        self.weights = weights
+        self.n_starts = n_starts
+
+    def _check_settings(self) -> None:
+        if self.identification not in _IDENTIFICATIONS:
+            msg = f"identification must be 'oe' or 'arx'; got {self.identification!r}"
+            raise DataError(msg)
+        for name, value, low in (("n_starts", self.n_starts, 1), ("arx_order", self.arx_order, 1)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                msg = f"{name} must be an integer >= {low}; got {value!r}"
+                raise DataError(msg)
+        if self.band is not None and not (len(self.band) == 2 and 0 <= self.band[0] < self.band[1]):
+            msg = f"band must be (f_lo, f_hi) in Hz with 0 <= f_lo < f_hi; got {self.band!r}"
+            raise DataError(msg)
+
+    def _pair_weights(self, pairs: Sequence[_Pair]) -> Array:
+        given = dict(self.weights or {})
+        labels = [p.label for p in pairs]
+        extra = sorted(set(given) - set(labels))
+        if extra:
+            msg = f"weights given for {extra}, which are not among the compared pairs {labels}"
+            raise DataError(msg)
+        out = np.array([float(given.get(label, 1.0)) for label in labels])
+        bad = [label for label, w in zip(labels, out, strict=True) if not (np.isfinite(w) and w > 0)]
+        if bad:
+            msg = f"weights must be finite and > 0; got {[given[b] for b in bad]} for {bad}"
+            raise DataError(msg)
+        return out
+
+    def _fit(
+        self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
+    ) -> ParameterEstimate:
+        self._check_settings()
+        pairs, tfs, source = _experimental(self, model, data)
+        self.transfer_functions_ = tuple(tfs)
+        weights = self._pair_weights(pairs)
+        engine = _ModelTF(model, space, pairs, self.position)
+        residuals, jacobian, info = self._residuals(engine, tfs, weights)
+        starts = _sobol_starts(space, int(self.n_starts), rng)
+        diagnostics = {
+            "identification": source,
+            "pairs": [p.label for p in pairs],
+            "transfer_functions": [tf.to_dict() for tf in tfs],
+            "weights": dict(zip([p.label for p in pairs], weights.tolist(), strict=True)),
+            **info,
+        }
+        return fit_least_squares(
+            self.method, space, residuals, jacobian if engine.analytic else None, starts=starts,
+            diagnostics=diagnostics,
+        )
+
+    def _residuals(
+        self, engine: _ModelTF, tfs: Sequence[TransferFunctionModel], weights: Array
+    ) -> tuple[Callable[[Array], Array], Callable[[Array], Array], dict[str, Any]]:
+        raise NotImplementedError
+
+
+def _sobol_starts(space: ParameterSpace, n_starts: int, rng: np.random.Generator) -> Array:
+    """The space's start and ``n_starts - 1`` scrambled Sobol points in the internal box (SI rows)."""
+    if n_starts <= 1:
+        return space.start[None, :]
+    lo, hi = space.internal_bounds()
+    finite = np.isfinite(lo) & np.isfinite(hi)
+    sobol = qmc.Sobol(d=space.n, scramble=True, rng=rng)
+    m = int(np.ceil(np.log2(n_starts - 1))) if n_starts > 2 else 0
+    points = sobol.random_base2(m)[: n_starts - 1]
+    u0 = space.to_internal(space.start)
+    u = np.where(finite, lo + points * np.where(finite, hi - lo, 0.0), u0)
+    return np.vstack([space.start, space.from_internal(u)])
+
+
+def _check_denominator(pair: _Pair, den_e: Array, degree: int) -> None:
+    if den_e.size - 1 != degree:
+        msg = (
+            f"experimental transfer function {pair.label} has {den_e.size - 1} poles but the model has {degree}; "
+            f"identify (or prune) to the physical order {degree}"
+        )
+        raise DataError(msg)
+
+
+class TwoStepTFEstimator(_TwoStep):
+    """Physical parameters from transfer-function coefficients (thesis 3.6.2, normalized-square index eq. 3.99).
+
+    Parameters
+    ----------
+    model, unknowns, bounds, start, values, rng
+        As for :class:`Estimator`; ``rng`` seeds the Sobol start points.
+    pairs : sequence of (input, output), optional
+        Transfer functions to compare; default every model input and output present in the data (for time data:
+        every excited input to every measured output).
+    position : mapping, optional
+        Axis positions of the model.
+    identification : {"oe", "arx"}
+        Step 1 for time data: output-error model of the physical order (exact ZOH inverse) or the thesis's
+        high-order ARX pruned to the physical modes.
+    arx_order : int
+        Order of the ARX model (``identification="arx"``); the thesis used 40.
+    band : (float, float), optional
+        Frequency band (Hz) of the rational fit for FRF data.
+    weights : mapping "input->output" -> float, optional
+        Factor on that pair's residuals (default 1).
+    n_starts : int
+        Start points: the start and ``n_starts - 1`` Sobol points inside the bounds.
+
+    Attributes
+    ----------
+    estimate_ : ParameterEstimate
+        ``diagnostics`` lists the pairs, the experimental transfer functions, the compared and the ignored
+        coefficients, and the multi-start runs.
+    transfer_functions_ : tuple of TransferFunctionModel
+        The experimental transfer functions of step 1.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> exact = model_transfer_functions(nm, [("F1", "d1"), ("F1", "d2"), ("F2", "d2")])
+    >>> est = TwoStepTFEstimator(nm, n_starts=4, rng=0).fit(exact)
+    >>> bool(np.allclose(est.estimate_.values, nm.nominal[est.space_.columns], rtol=1e-7))
+    True
+    """
+
+    method = "two-step-tf"
+
+    def _residuals(
+        self, engine: _ModelTF, tfs: Sequence[TransferFunctionModel], weights: Array
+    ) -> tuple[Callable[[Array], Array], Callable[[Array], Array], dict[str, Any]]:
+        degree = engine.degree
+        num_idx: list[NDArray[np.intp]] = []
+        num_ref: list[Array] = []
+        den_idx: list[NDArray[np.intp] | None] = []
+        den_ref: list[Array] = []
+        seen: list[Array] = []
+        ignored: dict[str, list[int]] = {}
+        for k, (pair, tf) in enumerate(zip(engine.pairs, tfs, strict=True)):
+            num_e, den_e = _coefficients_of(tf)
+            _check_denominator(pair, den_e, degree)
+            idx = np.flatnonzero(engine.num_mask[k])
+            if idx.size and idx.max() >= num_e.size:
+                msg = (
+                    f"experimental transfer function {pair.label} has a numerator of degree {num_e.size - 1} but the "
+                    f"model's has degree {int(idx.max())}; identify with a higher numerator order"
+                )
+                raise DataError(msg)
+            extra = [j for j in range(num_e.size) if j not in set(idx.tolist()) and num_e[j] != 0]
+            if extra:
+                ignored[pair.label] = extra
+            ref = num_e[idx]
+            didx = np.flatnonzero(engine.den_mask[:degree])
+            dref = den_e[didx]
+            if np.any(ref == 0) or np.any(dref == 0):
+                msg = (
+                    f"experimental transfer function {pair.label} has an exactly zero coefficient where the model's is "
+                    f"not; the relative index (eq. 3.99) is undefined there"
+                )
+                raise DataError(msg)
+            num_idx.append(idx)
+            num_ref.append(ref)
+            if any(np.array_equal(den_e, s) for s in seen):
+                den_idx.append(None)  # a common denominator is compared once
+                den_ref.append(np.zeros(0))
+            else:
+                seen.append(den_e)
+                den_idx.append(didx)
+                den_ref.append(dref)
+
+        def parts(p: Array, jac: bool) -> tuple[Array, Array | None]:
+            num, den, dnum, dden = engine.evaluate(p, jac)
+            res: list[Array] = []
+            jacs: list[Array] = []
+            for k in range(len(engine.pairs)):
+                w = weights[k]
+                res.append(w * (num[k, num_idx[k]] - num_ref[k]) / num_ref[k])
+                if dnum is not None:
+                    jacs.append(w * dnum[k, num_idx[k]] / num_ref[k][:, None])
+                di = den_idx[k]
+                if di is not None:
+                    res.append(w * (den[di] - den_ref[k]) / den_ref[k])
+                    if dden is not None:
+                        jacs.append(w * dden[di] / den_ref[k][:, None])
+            return np.concatenate(res), (np.vstack(jacs) if jacs else None)
+
+        def residuals(p: Array) -> Array:
+            return parts(p, False)[0]
+
+        def jacobian(p: Array) -> Array:
+            return _required(parts(p, True)[1])
+
+        info = {
+            "compared": {
+                pr.label: {"numerator_powers": num_idx[k].tolist(),
+                           "denominator_powers": [] if den_idx[k] is None else den_idx[k].tolist()}  # type: ignore[union-attr]
+                for k, pr in enumerate(engine.pairs)
+            },
+            "ignored_numerator_powers": ignored,
+            "residuals": int(sum(i.size for i in num_idx) + sum(0 if d is None else d.size for d in den_idx)),
+        }
+        return residuals, jacobian, info
+
+
+def _required(jac: Array | None) -> Array:
+    if jac is None:  # pragma: no cover - derivatives are always requested here
+        msg = "internal error: no Jacobian"
+        raise RuntimeError(msg)
+    return jac
+
+
+@dataclass(frozen=True)
+class _RootSet:
+    """Experimental roots of one polynomial with their residual weights."""
+
+    roots: CArray
+    weights: Array  # 1/sqrt(2) for members of complex pairs
+
+
+def _root_set(roots: CArray) -> _RootSet:
+    complex_member = np.abs(roots.imag) > 1e-12 * np.abs(roots)
+    return _RootSet(roots, np.where(complex_member, np.sqrt(0.5), 1.0))
+
+
+def _roots_of(coef_ascending: Array) -> CArray:
+    c = np.trim_zeros(coef_ascending[::-1], "f")
+    return np.asarray(np.roots(c), dtype=complex) if c.size > 1 else np.zeros(0, complex)
+
+
+class TwoStepZPKEstimator(_TwoStep):
+    """Physical parameters from poles, zeros and gains (thesis 3.6.2, eq. 3.103).
+
+    Parameters
+    ----------
+    model, unknowns, bounds, start, values, rng, pairs, position, identification, arx_order, band, weights, n_starts
+        As for :class:`TwoStepTFEstimator`.
+    roots : {"frequency-damping", "complex"}
+        Residual form of a paired root (see the module notes).
+
+    Attributes
+    ----------
+    estimate_ : ParameterEstimate
+        ``diagnostics`` lists the pairs, the experimental transfer functions, the number of compared poles and zeros
+        per pair and the experimental roots left unpaired at the estimate.
+    transfer_functions_ : tuple of TransferFunctionModel
+        The experimental transfer functions of step 1.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> exact = model_transfer_functions(nm, [("F1", "d1"), ("F1", "d2"), ("F2", "d2")])
+    >>> est = TwoStepZPKEstimator(nm, n_starts=4, rng=0).fit(exact)
+    >>> bool(np.allclose(est.estimate_.values, nm.nominal[est.space_.columns], rtol=1e-7))
+    True
+    """
+
+    method = "two-step-zp"
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        unknowns: Sequence[str] | None = None,
+        *,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        start: Mapping[str, float] | None = None,
+        values: Mapping[str, float] | None = None,
+        rng: RandomLike = None,
+        pairs: Sequence[tuple[str, str]] | None = None,
+        position: Mapping[str, float] | None = None,
+        identification: str = "oe",
+        arx_order: int = 40,
+        band: tuple[float, float] | None = None,
+        weights: Mapping[str, float] | None = None,
+        n_starts: int = 16,
+        roots: str = "frequency-damping",
+    ) -> None:
+        super().__init__(
+            model, unknowns, bounds=bounds, start=start, values=values, rng=rng, pairs=pairs, position=position,
+            identification=identification, arx_order=arx_order, band=band, weights=weights, n_starts=n_starts,
+        )
+        self.roots = roots
+
+    def _residuals(
+        self, engine: _ModelTF, tfs: Sequence[TransferFunctionModel], weights: Array
+    ) -> tuple[Callable[[Array], Array], Callable[[Array], Array], dict[str, Any]]:
+        if self.roots not in _ROOT_FORMS:
+            msg = f"roots must be 'frequency-damping' or 'complex'; got {self.roots!r}"
+            raise DataError(msg)
+        form = self.roots
+        degree = engine.degree
+        rho = engine.rho
+        # structural trimming of the model polynomials: [low, high] powers that are generically non-zero
+        num_span = []
+        for k, pair in enumerate(engine.pairs):
+            idx = np.flatnonzero(engine.num_mask[k])
+            if idx.size == 0:
+                msg = f"the model's transfer function {pair.label} is identically zero; it cannot be compared"
+                raise DataError(msg)
+            num_span.append((int(idx.min()), int(idx.max())))
+        didx = np.flatnonzero(engine.den_mask)
+        den_span = (int(didx.min()), int(didx.max()))
+        exp_poles: list[_RootSet | None] = []
+        exp_zeros: list[_RootSet] = []
+        gains: list[float] = []
+        seen: list[Array] = []
+        for k, (pair, tf) in enumerate(zip(engine.pairs, tfs, strict=True)):
+            num_e, den_e = _coefficients_of(tf)
+            _check_denominator(pair, den_e, degree)
+            lo_n, hi_n = num_span[k]
+            n_zeros_model = hi_n - lo_n
+            ze = _roots_of(num_e)
+            ze = ze[np.abs(ze) > 0]
+            if ze.size < n_zeros_model:
+                msg = (
+                    f"experimental transfer function {pair.label} has {ze.size} finite non-zero zeros but the model "
+                    f"has {n_zeros_model}; identify with a higher numerator order"
+                )
+                raise DataError(msg)
+            exp_zeros.append(_root_set(ze))
+            if num_e.size <= lo_n or num_e[lo_n] == 0 or den_e[den_span[0]] == 0:
+                msg = (
+                    f"experimental transfer function {pair.label} has a zero low-frequency coefficient (s^{lo_n} of "
+                    f"the numerator or s^{den_span[0]} of the denominator); its gain cannot be compared"
+                )
+                raise DataError(msg)
+            gains.append(float(num_e[lo_n] / den_e[den_span[0]]))
+            if any(np.array_equal(den_e, s) for s in seen):
+                exp_poles.append(None)
+            else:
+                seen.append(den_e)
+                pe = _roots_of(den_e)
+                pe = pe[np.abs(pe) > 0] if den_span[0] > 0 else pe
+                exp_poles.append(_root_set(pe))
+
+        def root_terms(
+            coef: Array, dcoef: Array | None, span: tuple[int, int], ref: _RootSet
+        ) -> tuple[Array, Array | None, list[complex]]:
+            lo, hi = span
+            c = coef[lo : hi + 1]
+            model_roots = _roots_of(c)  # in s / rho
+            if model_roots.size == 0:
+                return np.zeros(0), (np.zeros((0, 0)) if dcoef is not None else None), []
+            lam = model_roots * rho
+            cost = np.abs(lam[:, None] - ref.roots[None, :]) / np.abs(ref.roots)[None, :]
+            rows, cols = linear_sum_assignment(cost)
+            lam_m = lam[rows]
+            lam_e = ref.roots[cols]
+            w = ref.weights[cols]
+            unpaired = [complex(ref.roots[j]) for j in range(ref.roots.size) if j not in set(cols.tolist())]
+            dlam = None
+            if dcoef is not None:
+                x = model_roots[rows]
+                powers = x[:, None] ** np.arange(c.size)[None, :]
+                dp = np.arange(1, c.size)
+                deriv = (powers[:, :-1] * (dp * c[1:])[None, :]).sum(axis=1)  # P'(x)
+                dx = -np.einsum("rk,kj->rj", powers, dcoef[lo : hi + 1]) / deriv[:, None]
+                dlam = dx * rho
+            if form == "frequency-damping":
+                om_m, om_e = np.abs(lam_m), np.abs(lam_e)
+                ze_m, ze_e = -lam_m.real / om_m, -lam_e.real / om_e
+                # relative damping error; absolute where the experimental root is undamped (zeta = 0)
+                ze_scale = np.where(np.abs(ze_e) > 1e-12, np.abs(ze_e), 1.0)
+                res = np.concatenate([w * (om_m - om_e) / om_e, w * (ze_m - ze_e) / ze_scale])
+                jac = None
+                if dlam is not None:
+                    dom = (np.conj(lam_m)[:, None] * dlam).real / om_m[:, None]
+                    dze = -dlam.real / om_m[:, None] + (lam_m.real / om_m**2)[:, None] * dom
+                    jac = np.vstack([w[:, None] * dom / om_e[:, None], w[:, None] * dze / ze_scale[:, None]])
+            else:
+                rel = (lam_m - lam_e) / lam_e
+                res = np.concatenate([w * rel.real, w * rel.imag])
+                jac = None
+                if dlam is not None:
+                    drel = dlam / lam_e[:, None]
+                    jac = np.vstack([w[:, None] * drel.real, w[:, None] * drel.imag])
+            return res, jac, unpaired
+
+        def parts(p: Array, want_jac: bool) -> tuple[Array, Array | None, dict[str, Any]]:
+            num, den, dnum, dden, _, _ = engine.raw(p, want_jac)
+            res: list[Array] = []
+            jacs: list[Array] = []
+            unpaired: dict[str, list[list[float]]] = {}
+            unscale = rho ** -np.arange(degree + 1, dtype=float)
+            for k, pair in enumerate(engine.pairs):
+                wk = weights[k]
+                ref = exp_poles[k]
+                if ref is not None:
+                    r, j, left = root_terms(den, dden, den_span, ref)
+                    res.append(wk * r)
+                    if j is not None:
+                        jacs.append(wk * j)
+                    if left:
+                        unpaired[f"{pair.label} poles"] = [[z.real, z.imag] for z in left]
+                r, j, left = root_terms(num[k], None if dnum is None else dnum[k], num_span[k], exp_zeros[k])
+                res.append(wk * r)
+                if j is not None and j.size:
+                    jacs.append(wk * j)
+                if left:
+                    unpaired[f"{pair.label} zeros"] = [[z.real, z.imag] for z in left]
+                lo_n, lo_d = num_span[k][0], den_span[0]
+                g = num[k, lo_n] * unscale[lo_n] / (den[lo_d] * unscale[lo_d])
+                res.append(np.array([wk * (g - gains[k]) / gains[k]]))
+                if dnum is not None and dden is not None:
+                    dg = g * (dnum[k, lo_n] / num[k, lo_n] - dden[lo_d] / den[lo_d])
+                    jacs.append(wk * dg[None, :] / gains[k])
+            return np.concatenate(res), (np.vstack(jacs) if want_jac else None), unpaired
+
+        def residuals(p: Array) -> Array:
+            return parts(p, False)[0]
+
+        def jacobian(p: Array) -> Array:
+            return _required(parts(p, True)[1])
+
+        r_start, _, unpaired_start = parts(engine.space.start, False)
+        info = {
+            "roots": form,
+            "compared": {
+                pr.label: {"poles": 0 if exp_poles[k] is None else den_span[1] - den_span[0],
+                           "zeros": num_span[k][1] - num_span[k][0], "gain": f"s^{num_span[k][0]} / s^{den_span[0]}"}
+                for k, pr in enumerate(engine.pairs)
+            },
+            "unpaired_at_start": unpaired_start,
+            "residuals": int(r_start.size),
+        }
+        return residuals, jacobian, info
