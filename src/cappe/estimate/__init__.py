@@ -3,7 +3,9 @@ the ``cappe.estimate/1`` result, and local uncertainty / identifiability."""
 
 from cappe.estimate._base import Estimator, fit_least_squares
 from cappe.estimate._direct import DirectEstimator
+from cappe.estimate._feature_map import FeatureMapEstimator
 from cappe.estimate._hybrid import HybridEstimator
+from cappe.estimate._kalman import ExtendedKalmanEstimator, UnscentedKalmanEstimator
 from cappe.estimate._registry import METHODS, estimator_class
 from cappe.estimate._resampling import (
     BootstrapResult,
@@ -22,7 +24,10 @@ __all__ = [
     "ESTIMATE_FORMAT",
     "METHODS",
     "DirectEstimator",
+    "ExtendedKalmanEstimator",
+    "FeatureMapEstimator",
     "HybridEstimator",
+    "UnscentedKalmanEstimator",
     "TwoStepTFEstimator",
     "TwoStepZPKEstimator",
     "model_transfer_functions",
