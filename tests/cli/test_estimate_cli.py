@@ -77,3 +77,19 @@ def test_errors(capsys, tmp_path, rig_data):
     code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", frf_only, "--method", "direct")
     assert code == 1
     assert "F2" in err or "v1" in err or "a1" in err  # the missing channels are named
+
+
+def test_study_tabulates_mean_and_std_per_noise_level(capsys):
+    code, out, err = run(capsys, "study", "builtin:two-mass-rig", "--method", "direct", "--unknowns", "k11,k22",
+                         "--set", "k11=1.2e6", "--noise", "0,0.01", "--seeds", 2, "--duration", 1, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert doc["format"] == "cappe.study/1"
+    assert doc["truth"] == {"k11": 1.2e6, "k22": 0.24e6}
+    rows = {(r["noise"], r["parameter"]): r for r in doc["rows"]}
+    assert rows[(0.0, "k11")]["mean"] == pytest.approx(1.2e6, rel=1e-8)  # noise-free: exact
+    assert rows[(0.01, "k11")]["runs"] == 2
+    assert rows[(0.01, "k11")]["mean"] == pytest.approx(1.2e6, rel=0.02)
+    code, _, err = run(capsys, "study", "builtin:two-mass-rig", "--method", "direct", "--noise", "a,b")
+    assert code == 2
+    assert "--noise must be comma-separated fractions" in err

@@ -17,6 +17,7 @@ from cappe.estimate._resampling import (
 )
 from cappe.estimate._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
 from cappe.estimate._space import ParameterSpace
+from cappe.estimate._study import StudyResult, simulate_data, simulation_study
 from cappe.estimate._two_step import TwoStepTFEstimator, TwoStepZPKEstimator, model_transfer_functions
 from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
 
@@ -42,6 +43,9 @@ __all__ = [
     "LocalUncertainty",
     "ParameterEstimate",
     "ParameterSpace",
+    "StudyResult",
+    "simulate_data",
+    "simulation_study",
     "fit_least_squares",
     "jacobian_uncertainty",
     "read_estimate",
