@@ -93,3 +93,18 @@ def test_study_tabulates_mean_and_std_per_noise_level(capsys):
     code, _, err = run(capsys, "study", "builtin:two-mass-rig", "--method", "direct", "--noise", "a,b")
     assert code == 2
     assert "--noise must be comma-separated fractions" in err
+
+
+def test_settings_reach_the_estimator(capsys, rig_data):
+    code, out, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                         "--setting", "instruments=model", "--json")
+    assert code == 0, err
+    assert json.loads(out)["diagnostics"]["instruments"] == "model"
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                       "--setting", "bogus=1")
+    assert code == 2
+    assert "unexpected keyword argument 'bogus'" in err
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                       "--setting", "=1")
+    assert code == 2
+    assert "--setting must look like NAME=VALUE" in err

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import json
 import sys
 import warnings
 from pathlib import Path
@@ -26,6 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="bounds of an unknown (repeatable; default from the model file)")
     p.add_argument("--start", metavar="FILE.json", help="start values {name: value}")
     p.add_argument("--seed", type=int, default=0, help="seed for multi-start points and filters (default 0)")
+    p.add_argument("--setting", metavar="NAME=VALUE", action="append", default=[],
+                   help="method setting, e.g. instruments=model, passes=8, strategy=differential-evolution "
+                        "(repeatable; VALUE is JSON or a plain string)")
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
     p.set_defaults(func=run)
 
@@ -52,6 +56,21 @@ def _bounds(items: list[str]) -> dict[str, tuple[float, float]]:
             msg = f"--bounds must look like NAME=LO:HI; got {item!r}"
             raise UsageError(msg)
         out[name.strip()] = pair
+    return out
+
+
+def settings(items: list[str]) -> dict[str, Any]:
+    """``NAME=VALUE`` pairs; VALUE parsed as JSON when it is JSON, else kept as a string."""
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, value = item.partition("=")
+        if not sep or not name.strip():
+            msg = f"--setting must look like NAME=VALUE; got {item!r}"
+            raise UsageError(msg)
+        try:
+            out[name.strip()] = json.loads(value)
+        except json.JSONDecodeError:
+            out[name.strip()] = value
     return out
 
 
@@ -82,8 +101,13 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(msg)
     start = read_parameters(args.start) if args.start else None
     cls = estimator_class(args.method)
-    estimator = cls(ctx.numeric, names(args.unknowns), bounds=_bounds(args.bounds) or None, start=start,
-                    values=ctx.values, rng=args.seed)
+    options = settings(args.setting)
+    try:
+        estimator = cls(ctx.numeric, names(args.unknowns), bounds=_bounds(args.bounds) or None, start=start,
+                        values=ctx.values, rng=args.seed, **options)
+    except TypeError as exc:
+        msg = f"--setting: {exc} (method {args.method!r})"
+        raise UsageError(msg) from exc
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = estimator.fit(data).estimate_

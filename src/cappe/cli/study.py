@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import argparse
+import sys
+import warnings
 
 from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
 
@@ -19,12 +21,15 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="relative noise levels, comma-separated (default 0,0.01)")
     p.add_argument("--seeds", type=int, default=3, help="runs per noise level (default 3)")
     p.add_argument("--start", metavar="FILE.json", help="start values {name: value} (default: the model's)")
+    p.add_argument("--setting", metavar="NAME=VALUE", action="append", default=[],
+                   help="method setting passed to every run (repeatable), as for cappe estimate")
     p.add_argument("--fs", type=float, default=1000.0, help="sampling rate of simulated time data in Hz")
     p.add_argument("--duration", type=float, default=4.0, help="record length of simulated time data in s")
     p.set_defaults(func=run)
 
 
 def run(args: argparse.Namespace) -> int:
+    from cappe.cli.estimate import settings
     from cappe.estimate._study import simulation_study
     from cappe.io import read_parameters
 
@@ -41,9 +46,13 @@ def run(args: argparse.Namespace) -> int:
         msg = f"--noise needs levels >= 0 and --seeds >= 1; got {args.noise!r} and {args.seeds}"
         raise UsageError(msg)
     start = read_parameters(args.start) if args.start else None
-    result = simulation_study(model=ctx.numeric, method=args.method, truth=truth, unknowns=names(args.unknowns),
-                              noise_levels=levels, seeds=range(args.seeds), start=start, fs=args.fs,
-                              duration=args.duration)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = simulation_study(model=ctx.numeric, method=args.method, truth=truth, unknowns=names(args.unknowns),
+                                  noise_levels=levels, seeds=range(args.seeds), start=start,
+                                  settings=settings(args.setting), fs=args.fs, duration=args.duration)
+    for message in dict.fromkeys(str(w.message) for w in caught):
+        print(f"cappe: warning: {message}", file=sys.stderr)
     emit(args, result.to_dict(), f"{ctx.structure.name}, {args.method}: {args.seeds} runs per noise level\n"
          + result.to_text())
     return 0
