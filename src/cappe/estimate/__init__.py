@@ -6,6 +6,8 @@ from cappe.estimate._direct import DirectEstimator
 from cappe.estimate._feature_map import FeatureMapEstimator
 from cappe.estimate._hybrid import HybridEstimator
 from cappe.estimate._kalman import ExtendedKalmanEstimator, UnscentedKalmanEstimator
+from cappe.estimate._modal_updating import ModalUpdatingEstimator
+from cappe.estimate._one_step import FRFDerivatives, OneStepEstimator, OneStepFRFEstimator, frf_derivatives
 from cappe.estimate._registry import METHODS, estimator_class
 from cappe.estimate._resampling import (
     BootstrapResult,
@@ -27,7 +29,12 @@ __all__ = [
     "DirectEstimator",
     "ExtendedKalmanEstimator",
     "FeatureMapEstimator",
+    "FRFDerivatives",
     "HybridEstimator",
+    "ModalUpdatingEstimator",
+    "OneStepEstimator",
+    "OneStepFRFEstimator",
+    "frf_derivatives",
     "UnscentedKalmanEstimator",
     "TwoStepTFEstimator",
     "TwoStepZPKEstimator",
