@@ -108,3 +108,18 @@ def test_settings_reach_the_estimator(capsys, rig_data):
                        "--setting", "=1")
     assert code == 2
     assert "--setting must look like NAME=VALUE" in err
+
+
+def test_response_plot_before_and_after(capsys, tmp_path, rig_data):
+    plot = tmp_path / "resp.png"
+    code, out, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                         "--unknowns", "k11,k22", "--plot-response", plot, "--json")
+    assert code == 0, err
+    assert json.loads(out)["diagnostics"]["plot_response"] == str(plot)
+    assert plot.stat().st_size > 20000  # six panels of curves
+    ref = tmp_path / "ref.json"
+    assert run(capsys, "model", "modes", "builtin:two-mass-rig", "--modal-out", ref, "--sensors", "n1:x,n2:x")[0] == 0
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", ref, "--method", "modal",
+                       "--unknowns", "k11", "--plot-response", tmp_path / "x.png")
+    assert code == 2
+    assert "--plot-response needs time data or FRFs" in err

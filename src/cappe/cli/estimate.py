@@ -31,6 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="method setting, e.g. instruments=model, passes=8, strategy=differential-evolution "
                         "(repeatable; VALUE is JSON or a plain string)")
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
+    p.add_argument("--plot-response", metavar="FILE.png",
+                   help="measured vs model response before (start) and after estimation (time data or FRFs)")
     p.set_defaults(func=run)
 
 
@@ -117,6 +119,9 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         _plot(result, args.plot)
         doc["diagnostics"]["plot"] = args.plot
+    if args.plot_response:
+        _plot_response(ctx, estimator, result, data, args.plot_response)
+        doc["diagnostics"]["plot_response"] = args.plot_response
     emit(args, doc, _text(result, args.method))
     return 0 if result.success else 1
 
@@ -130,6 +135,36 @@ def _plot(result: Any, path: str) -> None:
                         title=f"{result.method}: parameter trajectories")
     else:
         correlation_plot(result, path)
+
+
+def _plot_response(ctx: ModelContext, estimator: Any, result: Any, data: Any, path: str) -> None:
+    from cappe.report import response_plot
+    from cappe.systems import time_response
+
+    kind = _kind(data)
+    space = estimator.space_
+    before = ctx.numeric.system(space.full(space.start), ctx.position)
+    after = ctx.numeric.system(space.full(result.values), ctx.position)
+    if kind == "time":
+        inputs = [n for n in before.input_names if n in data.channels]
+        outputs = [n for n in before.output_names if n in data.channels]
+        excitation = data.select(inputs)
+        curves = [time_response(system, excitation, outputs=outputs).select(outputs).values
+                  for system in (before, after)]
+        # the last 400 samples: a whole record of a random test is too dense to compare curves
+        window = slice(max(data.n_samples - 400, 0), None)
+        response_plot(data.time[window], data.select(outputs).values[:, window], curves[0][:, window],
+                      curves[1][:, window], path, labels=outputs,
+                      title=f"{result.method}: measured vs model (last {data.time[window].size} samples)")
+    elif kind == "frf":
+        pairs = [(o, i) for o in data.output_names for i in data.input_names]
+        measured = np.array([np.abs(data.response(o, i)) for o, i in pairs])
+        curves = [np.array([np.abs(s.frf(data.freq, i, o).H[0, 0]) for o, i in pairs]) for s in (before, after)]
+        response_plot(data.freq, measured, curves[0], curves[1], path, labels=[f"{o}/{i}" for o, i in pairs],
+                      xlabel="frequency (Hz)", log=True, title=f"{result.method}: measured vs model FRFs")
+    else:
+        msg = "--plot-response needs time data or FRFs; modal data have no response to plot"
+        raise UsageError(msg)
 
 
 def _text(result: Any, method: str) -> str:
