@@ -123,3 +123,20 @@ def test_response_plot_before_and_after(capsys, tmp_path, rig_data):
                        "--unknowns", "k11", "--plot-response", tmp_path / "x.png")
     assert code == 2
     assert "--plot-response needs time data or FRFs" in err
+
+
+def test_landscape_plot(capsys, tmp_path, rig_data):
+    plot = tmp_path / "land.png"
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "one-step",
+                       "--unknowns", "k11,k22", "--set", "c11=20", "--set", "c22=4",
+                       "--plot-landscape", f"k11,k22:{plot}")
+    assert code == 0, err
+    assert plot.stat().st_size > 10000
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                       "--unknowns", "k11,k22", "--plot-landscape", f"k11,k22:{plot}")
+    assert code == 1
+    assert "direct: no nonlinear cost to slice" in err
+    code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "one-step",
+                       "--unknowns", "k11,k22", "--plot-landscape", "k11:x.png")
+    assert code == 2
+    assert "--plot-landscape must look like A,B:FILE.png" in err

@@ -45,3 +45,19 @@ def test_stage_errors(rig, record):
         HybridEstimator(rig, ["k11"], stages=("direct", "magic")).fit(record)
     with pytest.raises(DataError, match=r"no data for stage\(s\) \['one-step'\]; it has \['direct'\]"):
         HybridEstimator(rig, ["k11"], stages=("direct", "one-step")).fit({"direct": record})
+
+
+def test_cost_slice_is_centred_on_the_optimum(rig, record):
+    est = HybridEstimator(rig, ["k11", "k22"], stages=("direct", "one-step"),
+                          values={"c11": 20.0, "c22": 4.0}).fit(record)
+    land = est.cost_slice(["k11", "k22"], n=21)
+    x, y, cost = land.minimum
+    # the grid spans +-6 std per axis in 20 steps: the grid minimum is within one step of the optimum and the cost
+    # there is no lower than the optimum's (up to the solver's tolerance)
+    step = np.diff(land.x).max(), np.diff(land.y).max()
+    assert abs(x - est.params_["k11"]) <= step[0]
+    assert abs(y - est.params_["k22"]) <= step[1]
+    assert cost >= est.estimate_.cost * (1 - 1e-6)
+    # 6 std away the cost has risen by about 36 noise variances (quadratic model, cost = |r|^2)
+    s2 = est.estimate_.cost / est.estimate_.diagnostics["degrees_of_freedom"]
+    assert land.values.max() > est.estimate_.cost + 20 * s2

@@ -31,6 +31,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="method setting, e.g. instruments=model, passes=8, strategy=differential-evolution "
                         "(repeatable; VALUE is JSON or a plain string)")
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
+    p.add_argument("--plot-landscape", metavar="A,B:FILE.png",
+                   help="the method's cost over unknowns A and B around the optimum (least-squares methods)")
     p.add_argument("--plot-response", metavar="FILE.png",
                    help="measured vs model response before (start) and after estimation (time data or FRFs)")
     p.set_defaults(func=run)
@@ -119,6 +121,14 @@ def run(args: argparse.Namespace) -> int:
     if args.plot:
         _plot(result, args.plot)
         doc["diagnostics"]["plot"] = args.plot
+    if args.plot_landscape:
+        pair, sep, target = args.plot_landscape.partition(":")
+        axes = names(pair) or []
+        if not sep or not target or len(axes) != 2:
+            msg = f"--plot-landscape must look like A,B:FILE.png; got {args.plot_landscape!r}"
+            raise UsageError(msg)
+        estimator.cost_slice(axes).plot(target, title=f"{result.method}: cost over {axes[0]} and {axes[1]}")
+        doc["diagnostics"]["plot_landscape"] = target
     if args.plot_response:
         _plot_response(ctx, estimator, result, data, args.plot_response)
         doc["diagnostics"]["plot_response"] = args.plot_response

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping, Sequence
+from contextvars import ContextVar
 from typing import Any, ClassVar
 
 import numpy as np
@@ -26,6 +27,10 @@ __all__ = ["Estimator", "fit_least_squares"]
 
 Array = NDArray[np.float64]
 Residuals = Callable[[Array], Array]
+
+#: The residual function of the last :func:`fit_least_squares` call, with its space: how an estimator learns the
+#: cost its method minimized without every method having to hand it over (``Estimator.cost_slice``).
+_LAST_FIT: ContextVar[tuple[ParameterSpace, Residuals, Array] | None] = ContextVar("_LAST_FIT", default=None)
 
 
 class Estimator:
@@ -76,7 +81,12 @@ class Estimator:
         )
         self.numeric_ = numeric
         self.space_ = space
-        result = self._fit(numeric, space, data, as_generator(self.rng))
+        token = _LAST_FIT.set(None)
+        try:
+            result = self._fit(numeric, space, data, as_generator(self.rng))
+            self._cost = _LAST_FIT.get()
+        finally:
+            _LAST_FIT.reset(token)
         if not result.success:
             warnings.warn(
                 f"{self.method} estimation did not converge: {result.message}", ConvergenceWarning, stacklevel=2
@@ -101,6 +111,44 @@ class Estimator:
     def params_(self) -> dict[str, float]:
         """``{name: estimate}``."""
         return self.estimate_.parameters
+
+    def cost_slice(self, names: Sequence[str], *, n: int = 31, span: float | None = None) -> Any:
+        """The method's cost ``|r|^2`` on a grid of two unknowns around the optimum, the others held there.
+
+        Each axis spans ``estimate * (1 +- span)`` clipped to the bounds (log-spaced for log-searched unknowns);
+        by default 6 standard errors either side (20 % where the error is undefined), where the cost has risen by
+        about 36 noise variances.
+        Returns a :class:`cappe.sensitivity.CostLandscape` (``.plot(path)``). Available for the methods that end in a
+        nonlinear least-squares fit (two-step, one-step, modal, feature-map, hybrid of those).
+        """
+        from cappe.sensitivity import CostLandscape
+
+        estimate = self.estimate_
+        captured = getattr(self, "_cost", None)
+        if captured is None:
+            msg = f"{self.method}: no nonlinear cost to slice (the method does not end in a least-squares search)"
+            raise ModelError(msg)
+        space, residuals, centre = captured
+        if len(names) != 2 or any(name not in estimate.names for name in names):
+            msg = f"cost_slice needs two of the unknowns {list(estimate.names)}; got {list(names)}"
+            raise ModelError(msg)
+        axes = []
+        for name in names:
+            k = space.names.index(name)
+            std = estimate.std[estimate.names.index(name)]
+            half = span if span is not None else (6 * std / abs(centre[k]) if np.isfinite(std) and centre[k] else 0.2)
+            lo = max(centre[k] * (1 - half), space.lower[k])
+            hi = min(centre[k] * (1 + half), space.upper[k])
+            axes.append(np.geomspace(lo, hi, n) if space.log[k] and lo > 0 else np.linspace(lo, hi, n))
+        ix, iy = (space.names.index(name) for name in names)
+        values = np.empty((n, n))
+        for i, yv in enumerate(axes[1]):
+            for j, xv in enumerate(axes[0]):
+                p = centre.copy()
+                p[ix], p[iy] = xv, yv
+                r = np.asarray(residuals(p), dtype=float)
+                values[i, j] = float(r @ r)
+        return CostLandscape((names[0], names[1]), axes[0], axes[1], values, space.full(centre))
 
     def get_params(self) -> dict[str, Any]:
         return {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
@@ -181,6 +229,7 @@ def fit_least_squares(
             {"runs": runs, **(diagnostics or {})},
         )
     p = space.from_internal(best.x)
+    _LAST_FIT.set((space, residuals, p))
     jac_p = best.jac / space.value_jacobian(best.x)  # back to d r / d p in SI
     unc = jacobian_uncertainty(names=space.names, values=p, jacobian=jac_p, residuals=best.fun,
                                noise_variance=noise_variance)

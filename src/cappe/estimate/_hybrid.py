@@ -13,7 +13,7 @@ from typing import Any
 import numpy as np
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator
+from cappe.estimate._base import _LAST_FIT, Estimator
 from cappe.estimate._registry import estimator_class
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -90,6 +90,9 @@ class HybridEstimator(Estimator):
                     return _failed(space, msg, history)
                 start = space.mapping(np.clip(result.values, space.lower, space.upper))
         assert result is not None  # stages is non-empty
+        last_cost = getattr(estimator, "_cost", None)
+        if last_cost is not None:
+            _LAST_FIT.set(last_cost)  # the hybrid's cost is its last stage's
         diag = dict(result.diagnostics)
         diag["stages"] = history
         return ParameterEstimate(
