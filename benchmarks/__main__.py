@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from benchmarks import bench_identify, bench_matrices, bench_modal, bench_sobol
+from benchmarks import bench_estimate, bench_identify, bench_matrices, bench_modal, bench_sobol
 
 
 def main() -> None:
@@ -10,6 +10,7 @@ def main() -> None:
     bench_modal.main()
     bench_sobol.main()
     bench_identify.main()
+    bench_estimate.main()
 
 
 if __name__ == "__main__":
