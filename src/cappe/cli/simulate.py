@@ -1,8 +1,23 @@
-"""``cappe simulate MODEL --excite INPUT=SIGNAL``: a simulated measurement (inputs and responses with noise)."""
+"""``cappe simulate``: simulated measurements from a model.
+
+* ``cappe simulate MODEL --excite INPUT=SIGNAL ...``: time data (inputs and responses with seeded noise).
+* ``cappe simulate MODEL [--params truth.json] [--positions all|AXIS=V,...] [--modes N] [--noise-frequency ...]
+  [--noise-damping ...] [--noise-shape ...] [--seed N] -o ref.json [--uff modes.uff] [--frf frf.uff
+  --driving-points IN,... --band LO:HI --lines N]``: reference modal data (cappe.modal/1) at the model's sensor
+  nodes, the exact modes of the true parameters (nominal values for parameters the file leaves out) tracked
+  across axis positions, with seeded noise; optionally as UFF 55 with the sensor nodes' global coordinates at the
+  first position (UFF 2411), and exact FRFs (no noise) from driving points to every sensor channel.
+
+``--modes`` larger than the number of oscillatory modes of the model is an error (exit 1).
+"""
 
 from __future__ import annotations
 
 import argparse
+import itertools
+import math
+from collections.abc import Sequence
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -10,25 +25,70 @@ import numpy as np
 from cappe.cli._common import ModelContext, UsageError, add_model_options, band, emit, names
 
 SIGNALS = ("random", "periodic-random", "chirp", "prbs", "impact", "sine:FREQ", "square:FREQ")
+#: Time-simulation options and their defaults (None on the command line means "not given").
+TIME_DEFAULTS = {"fs": 2048.0, "duration": 8.0, "amplitude": 10.0, "outputs": None, "noise": 0.0, "input_noise": 0.0}
+#: Reference-data options, by their command-line spelling.
+MODAL_OPTIONS = {
+    "positions": "--positions", "modes": "--modes", "noise_frequency": "--noise-frequency",
+    "noise_damping": "--noise-damping", "noise_shape": "--noise-shape", "uff": "--uff", "frf": "--frf",
+    "driving_points": "--driving-points", "frf_outputs": "--frf-outputs", "lines": "--lines",
+}
+#: Default number of FRF lines and the default top of the FRF band relative to the highest reference mode.
+DEFAULT_LINES, BAND_MARGIN = 801, 1.25
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser(
         "simulate",
-        help="simulated measurement: excite model inputs with test signals, record outputs with seeded noise",
+        help="simulated data: time records (--excite) or reference modes and FRFs at the sensor nodes",
+        description=(
+            "With --excite: excite model inputs with test signals and record outputs with seeded noise (time data). "
+            "Without --excite: reference modal data (cappe.modal/1) of the model at its parameter values "
+            "(--params truth.json; parameters it leaves out keep their nominal values) at its sensor nodes, "
+            "exact complex modes tracked across axis positions, with seeded noise; optionally UFF 55 (--uff) and "
+            "exact FRFs as UFF 58 (--frf)."
+        ),
     )
     add_model_options(p)
-    p.add_argument("--excite", metavar="INPUT=SIGNAL", action="append", default=[], required=True,
-                   help=f"excite a model input; SIGNAL is one of {', '.join(SIGNALS)} (repeatable)")
-    p.add_argument("--fs", type=float, default=2048.0, help="sampling rate in Hz (default 2048)")
-    p.add_argument("--duration", type=float, default=8.0, help="record length in s (default 8)")
-    p.add_argument("--band", metavar="LO:HI", help="excitation band in Hz for random and chirp (default 0:fs/2.56)")
-    p.add_argument("--amplitude", type=float, default=10.0,
-                   help="force level in N: RMS for random signals, peak otherwise (default 10)")
-    p.add_argument("--outputs", metavar="LIST", help="comma-separated model outputs to record (default all)")
-    p.add_argument("--noise", type=float, default=0.0, help="output noise, fraction of channel RMS (0.01 = 1 %%)")
-    p.add_argument("--input-noise", type=float, default=0.0, help="noise on the recorded inputs, fraction of RMS")
+    time = p.add_argument_group("time data (with --excite)")
+    time.add_argument("--excite", metavar="INPUT=SIGNAL", action="append", default=[],
+                      help=f"excite a model input; SIGNAL is one of {', '.join(SIGNALS)} (repeatable)")
+    time.add_argument("--fs", type=float, help="sampling rate in Hz (default 2048)")
+    time.add_argument("--duration", type=float, help="record length in s (default 8)")
+    time.add_argument("--amplitude", type=float,
+                      help="force level in N: RMS for random signals, peak otherwise (default 10)")
+    time.add_argument("--outputs", metavar="LIST", help="comma-separated model outputs to record (default all)")
+    time.add_argument("--noise", type=float, help="output noise, fraction of channel RMS (0.01 = 1 %%)")
+    time.add_argument("--input-noise", type=float, help="noise on the recorded inputs, fraction of RMS")
+    p.add_argument("--band", metavar="LO:HI",
+                   help="Hz; time data: excitation band of random and chirp signals (default 0:fs/2.56); "
+                        "reference data: FRF band (default 0 to 1.25 x the highest mode)")
     p.add_argument("--seed", type=int, default=0, help="seed for the signals and the noise (default 0)")
+    modal = p.add_argument_group("reference modal data (without --excite)")
+    modal.add_argument("--positions", metavar="all|AXIS=V[,V...]", action="append", default=[],
+                       help="axis positions: 'all' (every listed position of the model's axes) or values of one "
+                            "axis (repeatable; several axes combine; default the model's default position or "
+                            "--position)")
+    modal.add_argument("--modes", type=int, metavar="N",
+                       help="number of modes: the lowest N at the first position, tracked (default all)")
+    modal.add_argument("--noise-frequency", type=float, metavar="REL",
+                       help="frequency noise: f * (1 + REL * N(0,1)), e.g. 0.005 (default 0)")
+    modal.add_argument("--noise-damping", type=float, metavar="REL",
+                       help="damping noise: zeta * (1 + REL * N(0,1)), e.g. 0.05 (default 0)")
+    modal.add_argument("--noise-shape", type=float, metavar="REL",
+                       help="shape noise: complex Gaussian with RMS modulus REL x the mode's largest component, "
+                            "e.g. 0.02 (default 0)")
+    modal.add_argument("--uff", metavar="FILE.uff",
+                       help="also write the modes as UFF 55 with the sensor nodes (UFF 2411, first position)")
+    modal.add_argument("--frf", metavar="FILE",
+                       help="also write exact FRFs (UFF 58, CSV or npz by extension); several positions give "
+                            "one file each, named FILE_AXIS=VALUE")
+    modal.add_argument("--driving-points", metavar="LIST",
+                       help="FRF inputs: model inputs or sensor channels NODE:DIR (default all model inputs)")
+    modal.add_argument("--frf-outputs", metavar="LIST",
+                       help="FRF responses: model outputs, sensor channels or nodes (default every sensor channel)")
+    modal.add_argument("--lines", type=int, metavar="N",
+                       help=f"FRF frequency lines in --band (default {DEFAULT_LINES})")
     p.set_defaults(func=run)
 
 
@@ -70,6 +130,28 @@ def _signal(
 
 
 def run(args: argparse.Namespace) -> int:
+    if args.excite:
+        given = [flag for dest, flag in MODAL_OPTIONS.items() if getattr(args, dest) not in (None, [])]
+        if given:
+            verb = "belongs" if len(given) == 1 else "belong"
+            msg = f"{', '.join(given)} {verb} to reference modal data (without --excite), not to time simulation"
+            raise UsageError(msg)
+        for dest, default in TIME_DEFAULTS.items():
+            if getattr(args, dest) is None:
+                setattr(args, dest, default)
+        return _run_time(args)
+    given = [f"--{dest.replace('_', '-')}" for dest in TIME_DEFAULTS if getattr(args, dest) is not None]
+    if given:
+        verb = "belongs" if len(given) == 1 else "belong"
+        msg = (
+            f"{', '.join(given)} {verb} to time simulation (--excite INPUT=SIGNAL); reference modal data takes "
+            "--noise-frequency, --noise-damping and --noise-shape"
+        )
+        raise UsageError(msg)
+    return _run_modal(args)
+
+
+def _run_time(args: argparse.Namespace) -> int:
     from cappe.io import TimeData, write_time_data
     from cappe.systems import time_response
 
@@ -110,5 +192,139 @@ def run(args: argparse.Namespace) -> int:
         write_time_data(args.out, data)
         summary["out"] = args.out
         lines.append(f"wrote {args.out}")
+    emit(argparse.Namespace(**{**vars(args), "out": None}), summary, "\n".join(lines))
+    return 0
+
+
+def _parse_positions(items: list[str], ctx: ModelContext) -> list[dict[str, float]] | str:
+    """``--positions`` values: ``"all"`` or one axis' values each; axes combine, unnamed axes keep ``ctx.position``."""
+    if not items:
+        return [dict(ctx.position)]
+    structure = ctx.structure
+    if "all" in items:
+        if len(items) > 1:
+            msg = f"--positions all cannot be combined with other --positions values; got {items}"
+            raise UsageError(msg)
+        return "all"
+    listed = {a.name: a.positions for a in structure.axes}
+    known = "; ".join(f"{a} (positions {', '.join(f'{v:g}' for v in pos) or 'none listed'})"
+                      for a, pos in listed.items()) or "none (this model has no axes)"
+    values: dict[str, list[float]] = {}
+    for item in items:
+        axis, sep, rest = item.partition("=")
+        axis = axis.strip()
+        if not sep or not axis or not rest.strip():
+            msg = f"--positions must be 'all' or AXIS=VALUE[,VALUE...] (e.g. z=-0.294,0.135); got {item!r}"
+            raise UsageError(msg)
+        if axis not in listed:
+            msg = f"--positions {item!r}: model '{structure.name}' has no axis {axis!r}; its axes: {known}"
+            raise UsageError(msg)
+        for text in rest.split(","):
+            try:
+                value = float(text)
+            except ValueError:
+                value = math.nan
+            if not math.isfinite(value):
+                msg = f"--positions {item!r}: {text.strip()!r} is not a finite number (m or rad); axis {known}"
+                raise UsageError(msg)
+            if value in values.get(axis, []):
+                msg = f"--positions names {axis}={value:g} twice"
+                raise UsageError(msg)
+            values.setdefault(axis, []).append(value)
+    axes = [a for a in structure.axis_names if a in values]
+    return [{**ctx.position, **dict(zip(axes, combo, strict=True))}
+            for combo in itertools.product(*(values[a] for a in axes))]
+
+
+def _label(position: dict[str, float]) -> str:
+    return " ".join(f"{a}={v:g}" for a, v in position.items()) or "(no axes)"
+
+
+def _frf_path(path: str, position: dict[str, float], several: bool) -> Path:
+    p = Path(path)
+    if not several:
+        return p
+    tag = "_".join(f"{a}={v:g}" for a, v in position.items())
+    return p.with_name(f"{p.stem}_{tag}{p.suffix}")
+
+
+def _run_modal(args: argparse.Namespace) -> int:
+    from cappe.io import write_frf, write_modal_data, write_uff_modal
+    from cappe.modal._reference import reference_frf, reference_modes, sensor_coordinates
+
+    if args.frf is None:
+        stray = [flag for dest, flag in (("driving_points", "--driving-points"), ("frf_outputs", "--frf-outputs"),
+                                         ("lines", "--lines"), ("band", "--band")) if getattr(args, dest) is not None]
+        if stray:
+            verb = "sets" if len(stray) == 1 else "set"
+            msg = f"{', '.join(stray)} {verb} up the simulated FRFs; give --frf FILE as well"
+            raise UsageError(msg)
+    if args.lines is not None and args.lines < 2:
+        msg = f"--lines must be an integer >= 2; got {args.lines}"
+        raise UsageError(msg)
+    ctx = ModelContext(args)
+    model = ctx.numeric
+    positions = _parse_positions(args.positions, ctx)
+    levels = {key: getattr(args, f"noise_{key}") or 0.0 for key in ("frequency", "damping", "shape")}
+    ref = reference_modes(model, params=ctx.values, positions=positions, n_modes=args.modes,
+                          noise_frequency=levels["frequency"], noise_damping=levels["damping"],
+                          noise_shape=levels["shape"], rng=args.seed)
+    sets = [dict(s.position) for s in ref.sets]
+
+    frfs = []
+    if args.frf is not None:
+        top = BAND_MARGIN * max(float(np.max(s.frequency)) for s in ref.sets)
+        lo, hi = band(args.band) if args.band else (0.0, float(f"{top:.3g}"))
+        freq = np.linspace(lo, hi, args.lines or DEFAULT_LINES)
+        for position in sets:
+            frf = reference_frf(model, freq=freq, params=ctx.values, position=position,
+                                inputs=names(args.driving_points), outputs=names(args.frf_outputs))
+            frfs.append((_frf_path(args.frf, position, len(sets) > 1), position, frf))
+
+    files: dict[str, Any] = {}
+    lines = [
+        f"{ctx.structure.name}: {ref.sets[0].n_modes} modes at {len(ref.sets)} position(s), "
+        f"{len(ref.sensors)} sensor channels ({len(dict.fromkeys(s.split(':')[0] for s in ref.sensors))} nodes)"
+    ]
+    lines += [f"  {_label(s.position):>14s}  {s.frequency.min():.4g} - {s.frequency.max():.4g} Hz" for s in ref.sets]
+    lines.append(
+        f"noise: frequency {levels['frequency']:g}, damping {levels['damping']:g}, shape {levels['shape']:g} "
+        f"(relative std; seed {args.seed})"
+    )
+    if args.out:
+        write_modal_data(args.out, ref)
+        files["modal"] = args.out
+        lines.append(f"wrote {args.out} (cappe.modal/1)")
+    if args.uff:
+        nodes = sensor_coordinates(model, params=ctx.values, position=sets[0])
+        coordinates: dict[str | int, Sequence[float]] = {name: xyz for name, xyz in nodes.items()}
+        write_uff_modal(args.uff, ref, coordinates=coordinates)
+        files["uff"] = args.uff
+        lines.append(f"wrote {args.uff} (UFF 55 modes, UFF 2411 sensor nodes at {_label(sets[0])})")
+    if frfs:
+        files["frf"] = []
+        for path, position, frf in frfs:
+            write_frf(path, frf)
+            files["frf"].append({"path": str(path), "position": position})
+            lines.append(
+                f"wrote {path} ({len(frf.output_names)} responses x {len(frf.input_names)} driving points "
+                f"({', '.join(frf.input_names)}), {frf.freq.size} lines {frf.freq[0]:g}-{frf.freq[-1]:g} Hz, "
+                f"{_label(position)})"
+            )
+    summary = {
+        "model": ctx.structure.name,
+        "parameters": dict(ctx.overrides),
+        "n_sets": len(ref.sets),
+        "n_modes": ref.sets[0].n_modes,
+        "n_sensors": len(ref.sensors),
+        "sensors": list(ref.sensors),
+        "sets": [
+            {"position": s.position, "frequency_range": [float(s.frequency.min()), float(s.frequency.max())]}
+            for s in ref.sets
+        ],
+        "noise": levels,
+        "seed": args.seed,
+        "files": files,
+    }
     emit(argparse.Namespace(**{**vars(args), "out": None}), summary, "\n".join(lines))
     return 0

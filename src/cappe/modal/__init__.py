@@ -3,5 +3,17 @@
 from cappe.modal._batch import ModalBatch
 from cappe.modal._derivatives import ModalDerivatives, modal_derivatives
 from cappe.modal._engine import ModalEngine, ModeReference, modal_batch
+from cappe.modal._reference import axis_positions, reference_frf, reference_modes, sensor_coordinates
 
-__all__ = ["ModalBatch", "ModalDerivatives", "ModalEngine", "ModeReference", "modal_batch", "modal_derivatives"]
+__all__ = [
+    "ModalBatch",
+    "ModalDerivatives",
+    "ModalEngine",
+    "ModeReference",
+    "axis_positions",
+    "modal_batch",
+    "modal_derivatives",
+    "reference_frf",
+    "reference_modes",
+    "sensor_coordinates",
+]
