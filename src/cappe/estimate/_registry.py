@@ -19,6 +19,7 @@ METHODS: dict[str, tuple[str, str, str]] = {
     "feature-map": ("cappe.estimate._feature_map", "FeatureMapEstimator", "modal"),
     "modal": ("cappe.estimate._modal_updating", "ModalUpdatingEstimator", "modal"),
     "hybrid": ("cappe.estimate._hybrid", "HybridEstimator", "time"),
+    "automated-gsa": ("cappe.estimate._automated", "AutomatedIdentification", "modal"),
 }
 
 

@@ -1,6 +1,7 @@
 """Plots, animations and reports."""
 
 from cappe.report.animation import animate_mode_shape, animate_motion
+from cappe.report.html import write_html_report
 from cappe.report.plots import (
     bode_plot,
     correlation_plot,
@@ -27,4 +28,5 @@ __all__ = [
     "sobol_plot",
     "stabilization_plot",
     "trajectory_plot",
+    "write_html_report",
 ]

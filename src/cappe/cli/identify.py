@@ -1,0 +1,193 @@
+"""``cappe identify MODEL --reference ref.json``: the automated GSA-guided identification (paper 2022).
+
+Stages (progress bars on stderr when it is a terminal, or with ``--progress``): GSA, stiffness subproblems,
+joint refinements, damping least squares, validation. Prints the parameter table (estimate, uncertainty, truth
+and error when ``--truth`` is given), the validation statistics and the runtime per stage; ``-o`` writes
+cappe.estimate/1, ``--report`` a self-contained HTML report.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+import warnings
+from typing import Any
+
+import numpy as np
+
+from cappe.cli._common import UsageError, _pairs, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = sub.add_parser(
+        "identify",
+        help="automated identification of all unknowns from reference modes at axis positions (GSA-guided)",
+        description=(
+            "GSA over all unknowns, stiffness by repeated local searches per mode-position subproblem, damping by "
+            "linear least squares on modal damping contributions, joint refinement, and validation at a held-out "
+            "position (Ellinger & Zaeh 2022)."
+        ),
+    )
+    p.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
+    p.add_argument("--reference", required=True, metavar="FILE.json", help="reference modes (cappe.modal/1)")
+    p.add_argument("--validation", metavar="AXIS=VALUE,...",
+                   help="position held out for validation, e.g. z=-0.294; 'none' to identify from every position "
+                        "(default: the reference's first position when it has two or more)")
+    p.add_argument("--truth", metavar="FILE.json", help="true parameters of a simulated reference {name: value}")
+    p.add_argument("--params", metavar="FILE.json", help="values of known parameters {name: value} (SI)")
+    p.add_argument("--set", dest="overrides", metavar="NAME=VALUE", action="append", default=[],
+                   help="value of a known parameter (repeatable)")
+    p.add_argument("--unknowns", metavar="LIST", help="comma-separated unknowns (default: those marked unknown)")
+    p.add_argument("--n-gsa", type=int, default=1024, help="Sobol base sample size, a power of two (default 1024)")
+    p.add_argument("--n-opt", type=int, default=100, help="local searches per subproblem (default 100)")
+    p.add_argument("--threshold", type=float, default=0.01, help="significance threshold on ST (default 0.01)")
+    p.add_argument("--noise", metavar="F,Z,S",
+                   help="relative noise of the reference's frequencies, damping ratios and shapes (e.g. "
+                        "0.005,0.05,0.02): weights the final refinement by it")
+    p.add_argument("--first-order", action="store_true",
+                   help="final refinement on first-order modes (for first-order references) instead of exact ones")
+    p.add_argument("--permutations", type=int, default=10,
+                   help="random damping reassignments of the permuted-damping comparison (default 10)")
+    p.add_argument("--overlay", metavar="OUT,IN",
+                   help="sensor channels of the FRF shown in the report, e.g. table:x,table:x (default: the driving "
+                        "point with the largest peak)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    p.add_argument("--workers", type=int, help="threads (default: one per core)")
+    p.add_argument("--progress", action="store_true", help="progress bars even when stderr is not a terminal")
+    p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    p.add_argument("-o", "--out", metavar="FILE", help="write the result (cappe.estimate/1 JSON)")
+    p.set_defaults(func=run)
+
+
+def _position(value: str | None, reference: Any) -> dict[str, float] | None:
+    if value is None:
+        return dict(reference.sets[0].position) if len(reference.sets) >= 2 else None
+    if value.strip().lower() == "none":
+        return None
+    return _pairs([v for v in value.split(",") if v.strip()], "--validation")
+
+
+def _noise(value: str | None) -> tuple[float, float, float] | None:
+    if value is None:
+        return None
+    try:
+        levels = tuple(float(v) for v in value.split(","))
+    except ValueError:
+        levels = ()
+    if len(levels) != 3 or not all(math.isfinite(v) and v > 0 for v in levels):
+        msg = f"--noise must be three numbers > 0 like 0.005,0.05,0.02; got {value!r}"
+        raise UsageError(msg)
+    return (levels[0], levels[1], levels[2])
+
+
+def run(args: argparse.Namespace) -> int:
+    from cappe.estimate._automated import AutomatedIdentification
+    from cappe.io import read_modal_data, read_parameters
+    from cappe.model import NumericModel, load_model
+
+    for option, value, low in (("--n-gsa", args.n_gsa, 2), ("--n-opt", args.n_opt, 1),
+                               ("--permutations", args.permutations, 0)):
+        if value < low:
+            msg = f"{option} must be >= {low}; got {value}"
+            raise UsageError(msg)
+    if args.workers is not None and args.workers < 1:
+        msg = f"--workers must be >= 1; got {args.workers}"
+        raise UsageError(msg)
+    structure = load_model(args.model)
+    values: dict[str, float] = {}
+    if args.params:
+        values.update(read_parameters(args.params))
+    values.update(_pairs(args.overrides, "--set"))
+    structure.resolve_parameters(values)  # unknown names are an error here
+    truth = read_parameters(args.truth) if args.truth else None
+    if truth is not None:
+        structure.resolve_parameters(truth)
+    reference = read_modal_data(args.reference)
+    validation = _position(args.validation, reference)
+    progress = bool(args.progress or sys.stderr.isatty())
+    overlay = None
+    if args.overlay:
+        pair = names(args.overlay) or []
+        if len(pair) != 2:
+            msg = f"--overlay must look like OUT,IN (two sensor channels); got {args.overlay!r}"
+            raise UsageError(msg)
+        overlay = (pair[0], pair[1])
+    estimator = AutomatedIdentification(
+        NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
+        n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
+        n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args.noise),
+        overlay=overlay, n_workers=args.workers, progress=progress,
+    )
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        estimator.fit(reference)
+    for w in caught:
+        print(f"cappe: warning: {w.message}", file=sys.stderr)
+    result = estimator.estimate_
+    doc = result.to_dict()
+    if args.report:
+        from cappe.report.html import write_html_report
+
+        write_html_report(args.report, result=result, gsa=estimator.gsa_, validation=estimator.validation_,
+                          truth=truth, title=f"{structure.name}: automated identification")
+        doc["diagnostics"]["report"] = args.report
+    text = _text(result, truth, structure.name)
+    if args.report:
+        text += f"\nreport written to {args.report}"
+    if args.out:
+        text += f"\nresult (cappe.estimate/1) written to {args.out}"
+    emit(args, doc, text)
+    return 0 if result.success else 1
+
+
+def _row_stats(label: str, stats: dict[str, dict[str, float]]) -> list[str]:
+    lines = [f"{label}:", f"  {'':<16}{'FRAC %':>10}{'CSF %':>10}{'MACXP %':>10}{'NDD %':>10}"]
+    for key, title in (("worst", "worst"), ("p5", "5 % tail"), ("mean", "mean"), ("median", "median")):
+        cells = "".join(f"{100 * v:>10.2f}" if v is not None and np.isfinite(v) else f"{'-':>10}"
+                        for v in (stats[c][key] for c in ("frac", "csf", "macxp", "ndd")))
+        lines.append(f"  {title:<16}{cells}")
+    return lines
+
+
+def _text(result: Any, truth: dict[str, float] | None, model_name: str) -> str:
+    diag = result.diagnostics
+    settings = diag.get("settings", {})
+    lines = [f"{model_name}: automated identification of {len(result.names)} unknowns "
+             f"(n_gsa {settings.get('n_gsa')}, n_opt {settings.get('n_opt')}, threshold {settings.get('threshold')})",
+             f"identification positions: {diag.get('identification_positions')}; "
+             f"validation position: {diag.get('validation_position')}"]
+    header = f"  {'parameter':<12}{'estimate':>13}{'std %':>9}"
+    if truth is not None:
+        header += f"{'truth':>13}{'error %':>10}"
+    lines.append(header)
+    errors = []
+    for k, name in enumerate(result.names):
+        value = float(result.values[k])
+        std = float(result.std[k])
+        row = f"  {name:<12}{value:>13.5g}{(100 * std / abs(value) if np.isfinite(std) and value else math.nan):>9.3g}"
+        if truth is not None and name in truth:
+            err = 100 * (value / truth[name] - 1)
+            errors.append(abs(err))
+            row += f"{truth[name]:>13.5g}{err:>+10.3f}"
+        lines.append(row)
+    if errors:
+        lines.append(f"  worst |error| {max(errors):.3g} %")
+    costs = diag.get("costs", {})
+    lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in costs.items() if v is not None))
+    val = diag.get("validation", {})
+    if val.get("validation"):
+        lines += _row_stats(f"validation at {val['validation']['position']}", val["validation"]["statistics"])
+    if val.get("identification_statistics"):
+        lines += _row_stats("identification positions", val["identification_statistics"])
+    if val.get("permuted"):
+        means = {c: float(np.mean([p["statistics"][c]["mean"] for p in val["permuted"]])) for c in
+                 ("frac", "csf", "macxp", "ndd")}
+        lines.append(f"permuted damping ({len(val['permuted'])} reassignments), mean: "
+                     + ", ".join(f"{c.upper()} {100 * v:.2f} %" for c, v in means.items()))
+    timings = diag.get("timings", {})
+    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
+    if not result.success:
+        lines.append(f"not converged: {result.message}")
+    return "\n".join(lines)

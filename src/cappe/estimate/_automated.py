@@ -1,0 +1,1272 @@
+"""Automated identification guided by global sensitivity analysis (Ellinger & Zaeh 2022, sections 2.2-2.3).
+
+The pipeline (paper Fig. 1), for reference modes at several axis positions, one of which may be held out:
+
+1. **GSA** (:func:`cappe.sensitivity.model_sobol`): one shared Sobol' sample design over all unknowns within
+   their bounds, one batched modal evaluation per sample per identification position, and the total Sobol'
+   indices ``ST`` of MACXP (eq. 4) and NDD^2 (eq. 5) of every reference mode at every position. The
+   significant parameters of a mode-position pair are those with ``ST >= threshold`` (paper: 1 %).
+2. **Stiffness** (section 2.3.2, Fig. 2). Unknowns of kind ``damping`` and ``loss`` are damping unknowns; every
+   other unknown (stiffness, and mass, inertia, length or other if any) is a *modal* unknown, found in this stage.
+   For every mode-position subproblem whose MACXP has significant modal unknowns, ``n_opt`` local searches run
+   over those unknowns only, from random starts in the bounds, with every other unknown drawn at random in its
+   bounds for each run (the paper's brute force). The objective of subproblem (r, j) is the agreement of the
+   model mode paired with reference mode r at position j (largest MACXP):
+   ``J = w_f NFD^2 + w_s (1 - MAC)``, ``NFD = (f_m - f_r) / f_r``: the two things the MACXP measures (pole
+   proximity and shape similarity) in a smooth least-squares form (``1 - MAC`` is the squared norm of the
+   reference shape's residual off the model shape, as in :class:`~cappe.estimate.ModalUpdatingEstimator`).
+   The ``n_opt`` runs are one batch: a projected Levenberg-Marquardt iteration in log coordinates with analytic
+   eigenvalue and eigenvector derivatives (modal expansion, exact since all modes are known), every iteration
+   one batched eigen solution for all runs. For each modal unknown, the subproblem with the least spread of its
+   optimum over the runs (relative standard deviation, paper section 2.3.2; subproblems where half the runs or
+   more ended at a bound are passed over) gives its value, the median of the runs (the paper takes the mean;
+   the median ignores the runs trapped in other minima; both are reported). Then all modal unknowns are refined
+   jointly over all modes and positions (:class:`~cappe.estimate.ModalUpdatingEstimator`, frequency and shape
+   residuals, damping fixed), started at that selection and at a few alternatives (the consensus of all
+   subproblems, and the selections by the second, third ... least spread; a single local refinement can be
+   trapped where modes cross), the lowest cost winning; the diagnostics report the cost at the selection and
+   after, and the parameter changes.
+3. **Damping** (section 2.3.3). At the identified stiffness, the first-order damping ratio of every mode is
+   ``zeta_r = zeta_known,r + sum_n q_rn p_n`` with ``q_rn = d zeta_r / d p_n`` at fixed modes
+   (:attr:`cappe.modal.ModalBatch.damping_gradient`; exact for coefficients linear in the damping unknowns, as
+   ``c`` and ``eta * k`` are). Rows are the mode-position pairs: the paper's selection keeps those with the
+   least influence of the non-search (modal) unknowns on their NDD^2 (sum of their ST) whose residual damping
+   ``zeta_ref - zeta_known`` is at least ``residual_damping_threshold`` (paper: 0.5 %), enough of them for
+   ``2 n_damping`` rows (a third of all rows if more) and full column rank. Each row is divided by
+   ``zeta_ref`` (the residual is then the NDD) and solved by bounded linear least squares
+   (:func:`scipy.optimize.lsq_linear`).
+4. **Joint refinement** of all unknowns over all modes and positions (frequency, damping and shape residuals,
+   weights ``weights``), started at stages 2-3, on the model's exact complex modes (:class:`ExactModalProblem`;
+   ``exact=False``: first-order modes, :class:`~cappe.estimate.ModalUpdatingEstimator`); its Jacobian gives the
+   uncertainty and identifiability. Stages 1-3 use the first-order modes (light damping, assumption A1), whose
+   difference from exact complex modes (mode complexity from non-proportional damping) would otherwise bias
+   the estimates by up to about 1 % on closely spaced modes.
+5. **Validation** (:func:`validate_identification`) at the held-out position and at the identification positions:
+   FRAC, CSF, MACXP, NDD statistics (paper Tables 2-5); and the permuted-damping comparison (Fig. 7): the
+   identified damping unknowns' factors from their start (preliminary) values, reassigned to other damping
+   unknowns at random, give models whose validation criteria show what the damping identification is worth.
+"""
+
+from __future__ import annotations
+
+import copy
+import time
+import warnings
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any, ClassVar
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment, lsq_linear
+
+from cappe._rng import RandomLike
+from cappe.correlate import macxp, macxp_paired
+from cappe.estimate._base import _LAST_FIT, Estimator, fit_least_squares
+from cappe.estimate._modal_updating import ModalUpdatingEstimator
+from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._space import ParameterSpace
+from cappe.estimate._validation import ValidationResult, find_set, summarize, validate_identification
+from cappe.exceptions import DataError, ModelError
+from cappe.io.modal import ModalData, ModalDataSet
+from cappe.modal import ModalEngine
+from cappe.model import NumericModel, Structure
+from cappe.parallel import map_chunks
+
+__all__ = [
+    "DAMPING_KINDS",
+    "AutomatedIdentification",
+    "DampingLeastSquares",
+    "ExactModalProblem",
+    "SubproblemResult",
+    "damping_least_squares",
+    "select_stiffness",
+    "solve_subproblem",
+]
+
+Array = NDArray[np.float64]
+CArray = NDArray[np.complex128]
+#: Parameter kinds identified by the damping stage; every other unknown is found from frequencies and shapes.
+DAMPING_KINDS = ("damping", "loss")
+_REPEATED = 1e-9  # eigenvalues closer than this (relative) are treated as repeated in the shape derivatives
+_STEP = 1e-6  # relative step of the central differences of M and K (exact for matrices affine in a parameter)
+
+
+# -------------------------------------------------------------------------------------------------------------
+# stage 2: stiffness subproblems
+# -------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SubproblemResult:
+    """The ``n_opt`` local searches of one mode-position subproblem.
+
+    Attributes
+    ----------
+    mode : int
+        Reference mode (1-based, as in the paper).
+    position : dict
+        Axis position.
+    parameters : tuple of str
+        Searched (significant modal) unknowns.
+    values : ndarray, shape (n_opt, n_search)
+        Optimum of every run (SI).
+    cost : ndarray, shape (n_opt,)
+        Final objective ``w_f NFD^2 + w_s (1 - MAC)`` of every run.
+    iterations : int
+        Batched Levenberg-Marquardt iterations (every one a batched eigen solution of all active runs).
+    seconds : float
+        Wall time.
+    lower, upper : ndarray, shape (n_search,), optional
+        Bounds of the searched unknowns (to tell runs that ended at a bound).
+    """
+
+    mode: int
+    position: dict[str, float]
+    parameters: tuple[str, ...]
+    values: Array
+    cost: Array
+    iterations: int
+    seconds: float
+    lower: Array | None = None
+    upper: Array | None = None
+
+    @property
+    def median(self) -> Array:
+        return np.asarray(np.median(self.values, axis=0), dtype=float)
+
+    @property
+    def at_bound(self) -> Array:
+        """Fraction of the runs whose optimum lies at a bound (relative 1e-6), per searched unknown."""
+        if self.lower is None or self.upper is None:
+            return np.zeros(len(self.parameters))
+        hit = (self.values <= self.lower * (1 + 1e-6)) | (self.values >= self.upper * (1 - 1e-6))
+        return np.asarray(np.mean(hit, axis=0), dtype=float)
+
+    @property
+    def spread(self) -> Array:
+        """Relative standard deviation of each searched unknown's optimum over the runs; ``inf`` where half the
+        runs or more ended at a bound (the bound, not the data, held them: no evidence of a determined optimum)."""
+        spread = np.std(self.values, axis=0) / np.abs(self.median)
+        return np.asarray(np.where(self.at_bound >= 0.5, np.inf, spread), dtype=float)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "mode": self.mode,
+            "position": dict(self.position),
+            "parameters": list(self.parameters),
+            "median": dict(zip(self.parameters, self.median.tolist(), strict=True)),
+            "mean": dict(zip(self.parameters, np.mean(self.values, axis=0).tolist(), strict=True)),
+            "spread": dict(zip(self.parameters, self.spread.tolist(), strict=True)),
+            "at_bound": dict(zip(self.parameters, self.at_bound.tolist(), strict=True)),
+            "cost_median": float(np.median(self.cost)),
+            "cost_min": float(np.min(self.cost)),
+            "runs": int(self.cost.size),
+            "iterations": self.iterations,
+            "seconds": self.seconds,
+        }
+
+
+def _mode_problem(
+    engine: ModalEngine,
+    position: Mapping[str, float],
+    data_set: ModalDataSet,
+    mode: int,
+    columns: NDArray[np.intp],
+    weights: tuple[float, float],
+) -> Callable[[Array], tuple[Array, Array]]:
+    """Residuals (B, 1 + 2 n_s) and their Jacobian (B, 1 + 2 n_s, n_search) in SI units, for a batch of vectors."""
+    model = engine.model
+    x = data_set.shapes[:, mode] / np.linalg.norm(data_set.shapes[:, mode])
+    f_ref = float(data_set.frequency[mode])
+    pole_ref = data_set.poles[mode]
+    sw_f, sw_s = np.sqrt(weights[0]), np.sqrt(weights[1])
+
+    def evaluate(p: Array) -> tuple[Array, Array]:
+        b = p.shape[0]
+        batch = engine.evaluate(p, position, full_shapes=True)
+        freq, phi, a_all = batch.frequency, batch.full_shapes, batch.shapes
+        assert phi is not None  # full_shapes=True
+        valid = freq > 0
+        poles = np.where(valid, batch.first_order_poles, 1j)
+        crit = macxp_paired(a_all, poles, x[:, None], np.asarray(pole_ref))
+        k = np.argmax(np.where(valid, crit, -1.0), axis=1)
+        rows = np.arange(b)
+        lam_all = (2 * np.pi * freq) ** 2
+        lam = lam_all[rows, k]
+        phi_k = phi[rows, :, k]  # (B, n)
+        a = a_all[rows, :, k]  # (B, n_s)
+        f = freq[rows, k]
+        c = a @ x  # (B,) complex
+        aa = np.sum(a * a, axis=1)
+        e = a * (c / aa)[:, None] - x[None, :]
+        res = np.concatenate([(sw_f * (f - f_ref) / f_ref)[:, None], sw_s * e.real, sw_s * e.imag], axis=1)
+        jac = np.empty((b, res.shape[1], columns.size))
+        n = phi.shape[1]
+        own = np.arange(n)[None, :] == k[:, None]
+        denom = lam[:, None] - lam_all
+        scale = np.maximum(lam_all.max(axis=1, keepdims=True), 1e-300)
+        skip = own | (np.abs(denom) <= _REPEATED * scale)
+        safe = np.where(skip, 1.0, denom)
+        omega = np.sqrt(lam)
+        for i, col in enumerate(columns):
+            h = _STEP * np.maximum(np.abs(p[:, col]), 1e-300)
+            hi, lo = p.copy(), p.copy()
+            hi[:, col] += h
+            lo[:, col] -= h
+            m_hi = model.matrices(hi, position, names=("M", "K"))
+            m_lo = model.matrices(lo, position, names=("M", "K"))
+            dk = (m_hi["K"] - m_lo["K"]) / (2 * h)[:, None, None]
+            dm = (m_hi["M"] - m_lo["M"]) / (2 * h)[:, None, None]
+            dm_phi = np.einsum("bij,bj->bi", dm, phi_k)
+            g = np.einsum("bij,bj->bi", dk, phi_k) - lam[:, None] * dm_phi
+            proj = np.einsum("bis,bi->bs", phi, g)  # phi_s^T (dK - lam dM) phi_k
+            d_lam = proj[rows, k]
+            coef = np.where(skip, 0.0, proj / safe)
+            coef[rows, k] = -0.5 * np.sum(phi_k * dm_phi, axis=1)
+            da = np.einsum("bsn,bn->bs", a_all, coef)
+            d_f = d_lam / (2 * omega) / (2 * np.pi)
+            dc = da @ x
+            daa = 2 * np.sum(a * da, axis=1)
+            de = da * (c / aa)[:, None] + a * (dc / aa)[:, None] - a * (c * daa / aa**2)[:, None]
+            jac[:, 0, i] = sw_f * d_f / f_ref
+            jac[:, 1:, i] = np.concatenate([sw_s * de.real, sw_s * de.imag], axis=1)
+        return res, jac
+
+    return evaluate
+
+
+def solve_subproblem(
+    *,
+    model: NumericModel,
+    reference: ModalData,
+    set_index: int,
+    mode: int,
+    parameters: Sequence[str],
+    start: Array,
+    lower: ArrayLike,
+    upper: ArrayLike,
+    weights: tuple[float, float] = (1.0, 1.0),
+    max_iterations: int = 50,
+    engine: ModalEngine | None = None,
+) -> tuple[Array, Array, int]:
+    """Batched local searches of one mode-position subproblem (projected Levenberg-Marquardt, log coordinates).
+
+    Minimizes ``w_f NFD^2 + w_s (1 - MAC)`` of reference mode ``mode`` (0-based) of set ``set_index`` over
+    ``parameters`` for every row of ``start`` at once (see the module notes).
+
+    Parameters
+    ----------
+    model : NumericModel
+    reference : ModalData
+    set_index, mode : int
+        The reference set (position) and mode (0-based).
+    parameters : sequence of str
+        Searched parameters (positive, with ``0 < lower < upper``).
+    start : ndarray, shape (B, n_params)
+        Full parameter vectors of the runs: the searched entries are the starts, the others stay fixed.
+    lower, upper : sequence of float
+        Bounds of the searched parameters.
+    weights : (float, float)
+        ``(w_f, w_s)``.
+    max_iterations : int
+        Iteration limit.
+    engine : ModalEngine, optional
+        An engine at the reference's sensors (made if not given).
+
+    Returns
+    -------
+    values : ndarray, shape (B, n_search)
+        Optima (SI).
+    cost : ndarray, shape (B,)
+        Objective at the optima.
+    iterations : int
+        Iterations run.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> ref = ModalEngine(nm).modal_data(params={"k11": 1.5e6}, exact=False)
+    >>> starts = np.tile(nm.nominal, (3, 1))
+    >>> starts[:, nm.parameter_names.index("k11")] = [1.0e6, 1.3e6, 1.8e6]
+    >>> values, cost, _ = solve_subproblem(model=nm, reference=ref, set_index=0, mode=1, parameters=["k11"],
+    ...                                    start=starts, lower=[0.8e6], upper=[2.0e6])
+    >>> np.allclose(values[:, 0], 1.5e6, rtol=1e-8)
+    True
+    """
+    data_set = reference.sets[set_index]
+    eng = engine if engine is not None else ModalEngine(model, sensors=list(reference.sensors))
+    position = model.structure.resolve_position(data_set.position)
+    columns = np.array([model.parameter_names.index(n) for n in parameters], dtype=np.intp)
+    lo_p, hi_p = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    if not np.all((lo_p > 0) & (hi_p > lo_p)):
+        msg = f"subproblem parameters {list(parameters)} need bounds 0 < lower < upper; got {lo_p}, {hi_p}"
+        raise ModelError(msg)
+    lo, hi = np.log(lo_p), np.log(hi_p)
+    problem = _mode_problem(eng, position, data_set, mode, columns, weights)
+    p = np.array(start, dtype=float, copy=True)
+    u = np.clip(np.log(p[:, columns]), lo, hi)
+    p[:, columns] = np.exp(u)
+    r, j = problem(p)
+    cost = np.sum(r**2, axis=1)
+    b, s = u.shape
+    mu = np.full(b, 1e-2)
+    active = np.ones(b, dtype=bool)
+    iterations = 0
+    eye = np.eye(s)
+    for _ in range(max_iterations):
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            break
+        iterations += 1
+        ju = j[idx] * p[idx][:, columns][:, None, :]  # dr/du = dr/dp * p
+        g = np.einsum("bri,br->bi", ju, r[idx])
+        hess = np.einsum("bri,brj->bij", ju, ju)
+        ui = u[idx]
+        blocked = ((ui <= lo + 1e-12) & (g > 0)) | ((ui >= hi - 1e-12) & (g < 0))
+        diag = np.diagonal(hess, axis1=1, axis2=2)
+        damp = mu[idx, None] * np.maximum(diag, 1e-12 * np.maximum(diag.max(axis=1, keepdims=True), 1e-300))
+        mat = hess + damp[:, :, None] * eye[None]
+        free = ~blocked
+        mat = np.where(free[:, :, None] & free[:, None, :], mat, eye[None] * 1.0)
+        rhs = np.where(free, -g, 0.0)
+        step = np.linalg.solve(mat, rhs[:, :, None])[:, :, 0]
+        u_try = np.clip(ui + step, lo, hi)
+        p_try = p[idx].copy()
+        p_try[:, columns] = np.exp(u_try)
+        r_try, j_try = problem(p_try)
+        cost_try = np.sum(r_try**2, axis=1)
+        better = cost_try < cost[idx]
+        moved = np.max(np.abs(u_try - ui), axis=1)
+        gain = cost[idx] - cost_try
+        acc = idx[better]
+        u[acc], p[acc], r[acc], j[acc], cost[acc] = u_try[better], p_try[better], r_try[better], j_try[better], \
+            cost_try[better]
+        mu[idx] = np.where(better, np.maximum(mu[idx] / 3, 1e-10), mu[idx] * 4)
+        done = (better & ((gain <= 1e-10 * np.maximum(cost[idx] + gain, 1e-300)) | (moved < 1e-9))) \
+            | (mu[idx] > 1e8) | (cost[idx] < 1e-24)
+        active[idx[done]] = False
+    return np.asarray(p[:, columns], dtype=float), cost, iterations
+
+
+def select_stiffness(
+    subproblems: Sequence[SubproblemResult], names: Sequence[str]
+) -> dict[str, dict[str, Any]]:
+    """The paper's selection: for each name, the subproblem with the least relative spread; its median.
+
+    Returns ``{name: {"value", "mean", "spread", "subproblem", "mode", "position", "searched_in"}}`` for the
+    names searched in at least one subproblem where fewer than half of the runs ended at a bound.
+
+    Examples
+    --------
+    >>> a = SubproblemResult(1, {"z": 0.0}, ("k",), np.array([[1.0], [1.2], [0.8]]), np.zeros(3), 1, 0.0)
+    >>> b = SubproblemResult(2, {"z": 0.0}, ("k",), np.array([[2.0], [2.01], [1.99]]), np.zeros(3), 1, 0.0)
+    >>> select_stiffness([a, b], ["k"])["k"]["value"]
+    2.0
+    """
+    out: dict[str, dict[str, Any]] = {}
+    for name in names:
+        best: tuple[float, int, int] | None = None
+        count = 0
+        for s, sub in enumerate(subproblems):
+            if name not in sub.parameters:
+                continue
+            count += 1
+            i = sub.parameters.index(name)
+            spread = float(sub.spread[i])
+            if not np.isfinite(spread):
+                continue
+            if best is None or spread < best[0]:
+                best = (spread, s, i)
+        if best is None:
+            continue
+        spread, s, i = best
+        sub = subproblems[s]
+        out[name] = {"value": float(sub.median[i]), "mean": float(np.mean(sub.values[:, i])), "spread": spread,
+                     "subproblem": s, "mode": sub.mode, "position": dict(sub.position), "searched_in": count}
+    return out
+
+
+# -------------------------------------------------------------------------------------------------------------
+# stage 3: damping by linear least squares
+# -------------------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class DampingLeastSquares:
+    """Result of the linear least-squares damping stage (paper eqs 11-13).
+
+    Attributes
+    ----------
+    names : tuple of str
+        Damping unknowns.
+    values : ndarray, shape (n_d,)
+        Estimates (SI).
+    rows : list of dict
+        Every mode-position row: ``set``, ``mode`` (1-based), ``position``, ``zeta_reference``, ``zeta_known``,
+        ``zeta_residual``, ``interaction`` (non-search influence on NDD^2, NaN if unknown) and ``selected``.
+    q : ndarray, shape (n_rows, n_d)
+        ``d zeta / d p`` of every row (paper eq. 13, Q).
+    residual : ndarray, shape (n_selected,)
+        NDD residuals of the selected rows at the estimate.
+    rank : int
+        Column rank of the selected rows.
+    condition_number : float
+        Of the scaled least-squares matrix.
+    active_bounds : tuple of str
+        Unknowns that ended at a bound.
+    """
+
+    names: tuple[str, ...]
+    values: Array
+    rows: list[dict[str, Any]]
+    q: Array
+    residual: Array
+    rank: int
+    condition_number: float
+    active_bounds: tuple[str, ...]
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "values": dict(zip(self.names, self.values.tolist(), strict=True)),
+            "rows": self.rows,
+            "selected": int(sum(1 for r in self.rows if r["selected"])),
+            "rank": self.rank,
+            "condition_number": self.condition_number,
+            "residual_rms": float(np.sqrt(np.mean(self.residual**2))) if self.residual.size else 0.0,
+            "active_bounds": list(self.active_bounds),
+        }
+
+
+def _pair_modes(shapes: Array, poles: CArray, data_set: ModalDataSet) -> NDArray[np.intp]:
+    """Model mode (one-to-one, maximal total MACXP) of every reference mode."""
+    valid = np.flatnonzero(np.abs(poles) > 0)
+    matrix = macxp(shapes[:, valid].astype(complex), poles[valid], data_set.shapes, data_set.poles)
+    rows, cols = linear_sum_assignment(matrix, maximize=True)
+    out = np.empty(data_set.n_modes, dtype=np.intp)
+    out[cols] = valid[rows]
+    return out
+
+
+def damping_least_squares(
+    *,
+    model: NumericModel,
+    reference: ModalData,
+    params: Array,
+    damping: Sequence[str],
+    lower: ArrayLike,
+    upper: ArrayLike,
+    sets: Sequence[int] | None = None,
+    interaction: Mapping[tuple[int, int], float] | None = None,
+    n_rows: int | None = None,
+    residual_threshold: float = 0.005,
+) -> DampingLeastSquares:
+    """Damping unknowns from modal damping ratios at fixed modes: bounded linear least squares (paper eqs 11-13).
+
+    Parameters
+    ----------
+    model : NumericModel
+    reference : ModalData
+        Reference modes (damping ratios > 0).
+    params : ndarray, shape (n_params,)
+        Full parameter vector: identified stiffness; the damping unknowns' entries only linearize (exact when
+        the damping coefficients are linear in them).
+    damping : sequence of str
+        Damping unknowns.
+    lower, upper : sequence of float
+        Their bounds.
+    sets : sequence of int, optional
+        Reference sets used (default all).
+    interaction : mapping (set, mode) -> float, optional
+        Influence of the non-search unknowns on each row's NDD^2 (from the GSA; lower is better).
+        Without it every row passing the residual threshold is used.
+    n_rows : int, optional
+        Rows to select (default ``max(2 n_d, n_candidates // 3)``, more if needed for full column rank).
+    residual_threshold : float
+        Smallest residual damping ratio ``zeta_ref - zeta_known`` of a used row (paper: 0.005). Rows below it are
+        used only when the others do not determine every unknown.
+
+    Returns
+    -------
+    DampingLeastSquares
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> truth = nm.vector({"c11": 20.0, "c22": 1.5})
+    >>> ref = ModalEngine(nm).modal_data(params=truth, exact=False)
+    >>> res = damping_least_squares(model=nm, reference=ref, params=nm.nominal, damping=["c11", "c22"],
+    ...                             lower=[1.0, 0.1], upper=[50.0, 5.0], residual_threshold=0.0)
+    >>> res.values.round(6)
+    array([20. ,  1.5])
+    """
+    names = tuple(damping)
+    cols = np.array([model.parameter_names.index(n) for n in names], dtype=np.intp)
+    lo, hi = np.asarray(lower, dtype=float), np.asarray(upper, dtype=float)
+    engine = ModalEngine(model, sensors=list(reference.sensors))
+    used_sets = list(range(len(reference.sets))) if sets is None else list(sets)
+    rows: list[dict[str, Any]] = []
+    q_rows: list[Array] = []
+    p = np.asarray(params, dtype=float)
+    for j in used_sets:
+        data_set = reference.sets[j]
+        if np.any(data_set.damping <= 0):
+            msg = (f"reference set {j} (position {data_set.position}) has damping ratios <= 0; the damping stage "
+                   "needs > 0")
+            raise DataError(msg)
+        position = model.structure.resolve_position(data_set.position)
+        batch = engine.evaluate(p, position, contributions=True)
+        assert batch.damping_gradient is not None  # contributions=True
+        model_of = _pair_modes(batch.shapes[0], batch.first_order_poles[0], data_set)
+        grad = batch.damping_gradient[0][model_of][:, cols]  # (m, n_d)
+        known = batch.damping[0][model_of] - grad @ p[cols]
+        for r in range(data_set.n_modes):
+            inter = float("nan") if interaction is None else float(interaction.get((j, r), np.nan))
+            rows.append({"set": j, "mode": r + 1, "position": dict(data_set.position),
+                         "zeta_reference": float(data_set.damping[r]), "zeta_known": float(known[r]),
+                         "zeta_residual": float(data_set.damping[r] - known[r]), "interaction": inter,
+                         "selected": False})
+            q_rows.append(grad[r])
+    q = np.array(q_rows).reshape(len(rows), cols.size)
+    zeta_ref = np.array([r["zeta_reference"] for r in rows])
+    zeta_res = np.array([r["zeta_residual"] for r in rows])
+    scale = np.where(np.isfinite(hi), np.abs(hi), np.maximum(np.abs(p[cols]), 1.0))
+    a_all = q / zeta_ref[:, None] * scale[None, :]
+    inter_all = np.array([r["interaction"] for r in rows])
+    order = np.argsort(np.where(np.isfinite(inter_all), inter_all, np.inf), kind="stable")
+    passing = [i for i in order if zeta_res[i] >= residual_threshold]
+    failing = [i for i in order if zeta_res[i] < residual_threshold]
+    target = n_rows if n_rows is not None else (max(2 * cols.size, len(passing) // 3) if interaction else len(passing))
+    chosen: list[int] = []
+
+    def rank(idx: list[int]) -> int:
+        return int(np.linalg.matrix_rank(a_all[idx])) if idx else 0
+
+    for i in passing + failing:
+        if len(chosen) >= target and rank(chosen) == cols.size:
+            break
+        if i in failing and rank(chosen) == cols.size:
+            break
+        if i in failing and rank([*chosen, i]) == rank(chosen):
+            continue
+        chosen.append(i)
+    for i in chosen:
+        rows[i]["selected"] = True
+    a = a_all[chosen]
+    b = zeta_res[chosen] / zeta_ref[chosen]
+    if not chosen:
+        msg = "no mode-position rows for the damping least squares"
+        raise DataError(msg)
+    sol = lsq_linear(a, b, bounds=(lo / scale, hi / scale), method="bvls")
+    values = np.asarray(sol.x * scale, dtype=float)
+    sv = np.linalg.svd(a, compute_uv=False)
+    cond = float(sv[0] / sv[-1]) if sv.size and sv[-1] > 0 else float("inf")
+    at_bound = tuple(n for n, v, lo_i, hi_i in zip(names, values, lo, hi, strict=True)
+                     if np.isclose(v, lo_i, rtol=1e-9) or np.isclose(v, hi_i, rtol=1e-9))
+    return DampingLeastSquares(names, values, rows, q, np.asarray(a @ sol.x - b, dtype=float), rank(chosen), cond,
+                               at_bound)
+
+
+# -------------------------------------------------------------------------------------------------------------
+# the estimator
+# -------------------------------------------------------------------------------------------------------------
+
+
+def _position_label(position: Mapping[str, float]) -> str:
+    return ",".join(f"{k}={v:g}" for k, v in position.items()) or "-"
+
+
+class AutomatedIdentification(Estimator):
+    """GSA-guided identification of all unknowns from reference modes at several axis positions (see the module).
+
+    Parameters
+    ----------
+    model, unknowns, bounds, start, values, rng
+        See :class:`Estimator`. ``start`` is the preliminary model (default: the model's values); every unknown
+        needs finite bounds (the GSA samples within them).
+    n_gsa : int
+        Base sample size of the Sobol' design (power of two); the model runs ``n_gsa (D + 2)`` times per position.
+    n_opt : int
+        Local searches per mode-position subproblem.
+    threshold : float
+        Total Sobol' index from which a parameter is significant (paper: 0.01).
+    validation : mapping, optional
+        Axis position of the reference set held out for validation (e.g. ``{"z": -0.294}``); the others identify.
+    criteria : sequence of str
+        GSA outputs per mode and position, among ``("macxp", "ndd2", "frequency", "damping")``; ``macxp``
+        is needed for the stiffness subproblems, ``ndd2`` for the damping row selection.
+    weights : (float, float, float)
+        ``(w_f, w_z, w_s)`` of the frequency, damping and shape residuals of the subproblems (``w_f``, ``w_s``) and
+        of the refinements (see :class:`ModalUpdatingEstimator`). With noisy references use inverse noise variances.
+    residual_damping_threshold : float
+        Smallest residual damping ratio of a damping row (paper: 0.005).
+    damping_rows : int, optional
+        Rows of the damping least squares (default ``max(2 n_d, rows // 3)``).
+    max_iterations : int
+        Iteration limit of the batched subproblem searches.
+    refine_starts : int
+        Starts of the joint stiffness refinement: the paper's selection, the consensus of all subproblems
+        (each unknown's median over the subproblems that determine it) and the selections by 2nd, 3rd ... least
+        spread; the lowest final cost wins. A single start can be trapped where modes cross between positions.
+    truth : mapping, optional
+        True parameters of a simulated reference: validation FRFs then come from the model at the truth.
+    n_permutations : int
+        Random reassignments of the damping factors in the permuted-damping comparison (0: none).
+    exact : bool
+        Final joint refinement on the model's exact complex modes (default; right for measured modes and for
+        references simulated with exact modes) rather than first-order ones (right for first-order references).
+    noise : (float, float, float), optional
+        Relative noise of the reference's frequencies, damping ratios and shape components (e.g.
+        ``(0.005, 0.05, 0.02)``): the final refinement then weights its residuals by their noise (see
+        :class:`ExactModalProblem`), which makes its 95 % intervals meaningful. Needs ``exact``.
+    overlay : (str, str), optional
+        Output and input channel of the FRF kept for overlays (default: the driving point with the largest peak).
+    n_workers : int, optional
+        Threads for the GSA and the subproblems (default one per core).
+    progress : bool
+        Progress bars (tqdm, stderr) per stage.
+
+    Attributes
+    ----------
+    estimate_ : ParameterEstimate
+        All unknowns with the joint refinement's uncertainty; ``diagnostics`` holds ``gsa``, ``subproblems``,
+        ``selection``, ``stiffness_refinement``, ``damping``, ``costs``, ``timings`` (s) and ``validation``.
+    gsa_ : ModelSobolResult
+    subproblems_ : list of SubproblemResult
+    damping_ : DampingLeastSquares or None
+    validation_ : dict
+        ``"validation"``: ValidationResult at the held-out position (or None), ``"identification"``: list at the
+        identification positions, ``"permuted"``: list of ValidationResult at the held-out (else first) position.
+    timings_ : dict
+        Seconds per stage.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> rig = load_model("builtin:two-mass-rig")
+    >>> truth = {"k11": 1.5e6, "k22": 0.25e6, "c11": 15.0, "c22": 1.0}
+    >>> ref = ModalEngine(rig).modal_data(params=truth)
+    >>> est = AutomatedIdentification(rig, ["k11", "k22", "c11", "c22"], n_gsa=64, n_opt=4, rng=0,
+    ...                               bounds={"k11": (1e6, 2e6), "k22": (0.2e6, 0.3e6), "c11": (5, 30),
+    ...                                       "c22": (0.2, 3)}, n_permutations=0, n_workers=1).fit(ref)
+    >>> {k: round(v / truth[k], 6) for k, v in est.params_.items()}
+    {'k11': 1.0, 'k22': 1.0, 'c11': 1.0, 'c22': 1.0}
+    """
+
+    method: ClassVar[str] = "automated-gsa"
+
+    def __init__(
+        self,
+        model: NumericModel | Structure,
+        unknowns: Sequence[str] | None = None,
+        *,
+        bounds: Mapping[str, Sequence[float]] | None = None,
+        start: Mapping[str, float] | None = None,
+        values: Mapping[str, float] | None = None,
+        rng: RandomLike = None,
+        n_gsa: int = 1024,
+        n_opt: int = 100,
+        threshold: float = 0.01,
+        validation: Mapping[str, float] | None = None,
+        criteria: Sequence[str] = ("macxp", "ndd2"),
+        weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        residual_damping_threshold: float = 0.005,
+        damping_rows: int | None = None,
+        max_iterations: int = 50,
+        refine_starts: int = 3,
+        truth: Mapping[str, float] | None = None,
+        n_permutations: int = 10,
+        exact: bool = True,
+        noise: Sequence[float] | None = None,
+        overlay: tuple[str, str] | None = None,
+        n_workers: int | None = None,
+        progress: bool = False,
+    ) -> None:
+        super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
+        self.n_gsa = n_gsa
+        self.n_opt = n_opt
+        self.threshold = threshold
+        self.validation = validation
+        self.criteria = criteria
+        self.weights = weights
+        self.residual_damping_threshold = residual_damping_threshold
+        self.damping_rows = damping_rows
+        self.max_iterations = max_iterations
+        self.refine_starts = refine_starts
+        self.truth = truth
+        self.n_permutations = n_permutations
+        self.exact = exact
+        self.noise = noise
+        self.overlay = overlay
+        self.n_workers = n_workers
+        self.progress = progress
+
+    # -- checks -------------------------------------------------------------------------------------------------
+    def _check(self, model: NumericModel, space: ParameterSpace, data: Any) -> tuple[list[int], int | None]:
+        """Validated settings and data: (identification set indices, validation set index or None)."""
+        if not isinstance(data, ModalData):
+            msg = f"automated identification needs reference ModalData (cappe.modal/1); got {type(data).__name__}"
+            raise DataError(msg)
+        name = model.structure.name
+        if not data.sets:
+            msg = "reference modal data have no sets; the identification needs modes at one or more positions"
+            raise DataError(msg)
+        for setting, value, low in (("n_gsa", self.n_gsa, 2), ("n_opt", self.n_opt, 1),
+                                    ("max_iterations", self.max_iterations, 1),
+                                    ("refine_starts", self.refine_starts, 1),
+                                    ("n_permutations", self.n_permutations, 0)):
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < low:
+                msg = f"{setting} must be an integer >= {low}; got {value!r}"
+                raise DataError(msg)
+        if not (isinstance(self.threshold, (int, float)) and 0 <= self.threshold < 1):
+            msg = f"threshold must be a number in [0, 1); got {self.threshold!r}"
+            raise DataError(msg)
+        if "macxp" not in tuple(self.criteria):
+            msg = f"criteria must include 'macxp' (the stiffness subproblems use it); got {list(self.criteria)}"
+            raise DataError(msg)
+        w = np.asarray(self.weights, dtype=float)
+        if w.shape != (3,) or not np.all(np.isfinite(w) & (w >= 0)) or w[0] + w[2] == 0:
+            msg = f"weights (w_f, w_z, w_s) must be three finite numbers >= 0 with w_f + w_s > 0; got {self.weights!r}"
+            raise DataError(msg)
+        if self.noise is not None:
+            levels = np.asarray(self.noise, dtype=float)
+            if levels.shape != (3,) or not np.all(np.isfinite(levels) & (levels > 0)):
+                msg = f"noise must be three numbers > 0 (frequency, damping, shape); got {self.noise!r}"
+                raise DataError(msg)
+            if not self.exact:
+                msg = "noise weighting needs the exact-mode refinement (exact=True)"
+                raise DataError(msg)
+        bad = [n for n, lo, hi in zip(space.names, space.lower, space.upper, strict=True)
+               if not (np.isfinite(lo) and np.isfinite(hi) and lo > 0)]
+        if bad:
+            msg = f"unknowns {bad} of model '{name}' need finite bounds 0 < lower < upper for the GSA and searches"
+            raise ModelError(msg)
+        labels, _ = model.sensor_matrix()
+        missing = [s for s in data.sensors if s not in labels]
+        if missing:
+            msg = f"reference sensors {missing} are not sensor channels of model '{name}'; its channels: {labels}"
+            raise DataError(msg)
+        for k, data_set in enumerate(data.sets):
+            where = f"reference set {k} (position {data_set.position})"
+            unknown_axes = sorted(set(data_set.position) - set(model.axis_names))
+            if unknown_axes:
+                msg = (f"{where}: axes {unknown_axes} are not axes of model '{name}' "
+                       f"(its axes: {list(model.axis_names)})")
+                raise DataError(msg)
+            missing_axes = sorted(set(model.axis_names) - set(data_set.position))
+            if missing_axes:
+                msg = f"{where}: no value for the model's axes {missing_axes}"
+                raise DataError(msg)
+            if data_set.n_modes == 0:
+                msg = f"{where} has no modes"
+                raise DataError(msg)
+            if data_set.n_modes > model.n_dof:
+                msg = f"{where} has {data_set.n_modes} modes; model '{name}' has only {model.n_dof}"
+                raise DataError(msg)
+            if np.any(data_set.frequency <= 0):
+                bad_modes = (np.flatnonzero(data_set.frequency <= 0) + 1).tolist()
+                msg = f"{where}: modes {bad_modes} have frequencies <= 0 Hz"
+                raise DataError(msg)
+            if np.any(data_set.damping <= 0):
+                bad_modes = (np.flatnonzero(data_set.damping <= 0) + 1).tolist()
+                msg = f"{where}: modes {bad_modes} have damping ratios <= 0; NDD and the damping stage need > 0"
+                raise DataError(msg)
+            zero = np.flatnonzero(np.sum(np.abs(data_set.shapes) ** 2, axis=0) == 0)
+            if zero.size:
+                msg = f"{where}: modes {(zero + 1).tolist()} have all-zero shapes"
+                raise DataError(msg)
+        held: int | None = None
+        if self.validation is not None:
+            held = find_set(data, self.validation, model)
+        ident = [k for k in range(len(data.sets)) if k != held]
+        if not ident:
+            msg = "every reference set is held out for validation; at least one position must identify"
+            raise DataError(msg)
+        return ident, held
+
+    # -- the pipeline -------------------------------------------------------------------------------------------
+    def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
+             rng: np.random.Generator) -> ParameterEstimate:
+        from tqdm.auto import tqdm
+
+        from cappe.sensitivity import model_sobol
+
+        ident, held = self._check(model, space, data)
+        t_total = time.perf_counter()
+        timings: dict[str, float] = {}
+        caught: list[str] = []
+        structure = model.structure
+        kinds = {n: structure.parameter(n).kind for n in space.names}
+        damp_names = [n for n in space.names if kinds[n] in DAMPING_KINDS]
+        modal_names = [n for n in space.names if kinds[n] not in DAMPING_KINDS]
+        ident_ref = ModalData(data.sensors, tuple(data.sets[k] for k in ident), data.source)
+        seeds = rng.integers(1, 2**31, size=4)
+        w_f, w_z, w_s = (float(v) for v in self.weights)
+        # the known parameters' values: the GSA evaluates the model at nm.nominal, so hand it a view whose
+        # nominal vector holds them
+        gsa_model = model
+        if not np.array_equal(space.base, model.nominal):
+            gsa_model = copy.copy(model)
+            gsa_model.nominal = space.base.copy()
+        bounds_arr = np.column_stack([space.lower, space.upper])
+
+        # 1. GSA ------------------------------------------------------------------------------------------------
+        t = time.perf_counter()
+        gsa = model_sobol(gsa_model, ident_ref, parameters=list(space.names), bounds=bounds_arr, n=int(self.n_gsa),
+                          rng=int(seeds[0]), criteria=tuple(self.criteria), n_workers=self.n_workers,
+                          progress=self.progress)
+        timings["gsa"] = time.perf_counter() - t
+        st = gsa.sobol.ST
+        table: dict[tuple[int, int, str], Array] = {}
+        out_index = 0
+        for j in range(len(ident)):
+            for r in range(ident_ref.sets[j].n_modes):
+                for c in self.criteria:
+                    table[(j, r, c)] = st[out_index]
+                    out_index += 1
+        significant = {key: tuple(n for n, v in zip(space.names, row, strict=True) if v >= self.threshold)
+                       for key, row in table.items()}
+
+        # 2. stiffness subproblems --------------------------------------------------------------------------------
+        t = time.perf_counter()
+        engine = ModalEngine(model, sensors=list(data.sensors))
+        jobs: list[tuple[int, int, tuple[str, ...]]] = []
+        for j in range(len(ident)):
+            position = structure.resolve_position(ident_ref.sets[j].position)
+            engine.evaluate(space.full(space.start), position)  # warm the per-position caches before threading
+            for r in range(ident_ref.sets[j].n_modes):
+                search = tuple(n for n in significant[(j, r, "macxp")] if n in modal_names)
+                if search:
+                    jobs.append((j, r, search))
+        job_seeds = np.random.default_rng(int(seeds[1])).integers(1, 2**31, size=max(len(jobs), 1))
+        lo_u, hi_u = space.internal_bounds()
+        n_opt = int(self.n_opt)
+        bar: Any = tqdm(total=len(jobs), desc="stiffness subproblems", unit="subproblem", disable=not self.progress)
+
+        def run(s: slice) -> list[SubproblemResult]:
+            results = []
+            for q in range(s.start, s.stop):
+                j, r, search = jobs[q]
+                sub_rng = np.random.default_rng(int(job_seeds[q]))
+                u = sub_rng.uniform(lo_u, hi_u, size=(n_opt, space.n))  # random unknowns, starts included
+                starts = space.full(space.from_internal(u))
+                idx = [space.names.index(n) for n in search]
+                t0 = time.perf_counter()
+                values, cost, iters = solve_subproblem(
+                    model=model, reference=ident_ref, set_index=j, mode=r, parameters=search, start=starts,
+                    lower=space.lower[idx], upper=space.upper[idx], weights=(w_f, w_s),
+                    max_iterations=int(self.max_iterations), engine=engine)
+                position = structure.resolve_position(ident_ref.sets[j].position)
+                results.append(SubproblemResult(r + 1, dict(position), search, values, cost, iters,
+                                                time.perf_counter() - t0, space.lower[idx], space.upper[idx]))
+                bar.update(1)
+            return results
+
+        try:
+            parts = map_chunks(run, len(jobs), chunk_size=1, n_workers=self.n_workers) if jobs else []
+        finally:
+            bar.close()
+        subproblems = [sub for part in parts for sub in part]
+        selection = select_stiffness(subproblems, modal_names)
+        timings["stiffness_subproblems"] = time.perf_counter() - t
+        current = space.start.copy()
+        for n, sel in selection.items():
+            i = space.names.index(n)
+            current[i] = np.clip(sel["value"], space.lower[i], space.upper[i])
+        selected = current.copy()
+
+        # 2b. joint stiffness refinement ---------------------------------------------------------------------------
+        t = time.perf_counter()
+        refinement: dict[str, Any] = {}
+        if modal_names:
+            candidates = _alternative_starts(subproblems, space, selected, modal_names, int(self.refine_starts))
+            best: tuple[Array, dict[str, Any]] | None = None
+            runs = []
+            for label, vector in tqdm(candidates, desc="stiffness refinement", unit="start",
+                                      disable=not self.progress):
+                found, info = self._refine(model, space, ident_ref, vector, modal_names, (w_f, 0.0, w_s), caught)
+                runs.append({"start": label, "cost_before": info["cost_before"], "cost_after": info["cost_after"]})
+                if best is None or info["cost_after"] < best[1]["cost_after"] * (1 - 1e-9):
+                    best = (found, {**info, "start": label})
+            assert best is not None  # candidates always hold the selection
+            current, refinement = best
+            refinement["runs"] = runs
+            refinement["cost_before"] = runs[0]["cost_before"]  # the paper's selection
+            refinement["selection"] = {n: float(selected[space.names.index(n)]) for n in modal_names}
+            refinement["relative_change"] = {n: float(current[space.names.index(n)] / selected[space.names.index(n)]
+                                                      - 1.0) for n in modal_names}
+        timings["stiffness_refinement"] = time.perf_counter() - t
+
+        # 3. damping least squares -------------------------------------------------------------------------------
+        t = time.perf_counter()
+        damping_result: DampingLeastSquares | None = None
+        if damp_names:
+            interaction: dict[tuple[int, int], float] | None = None
+            if "ndd2" in tuple(self.criteria):
+                others = np.array([n not in damp_names for n in space.names])
+                interaction = {(k, r): float(np.sum(np.clip(table[(j, r, "ndd2")][others], 0, None)))
+                               for j, k in enumerate(ident) for r in range(data.sets[k].n_modes)}
+            didx = [space.names.index(n) for n in damp_names]
+            damping_result = damping_least_squares(
+                model=model, reference=data, params=space.full(current), damping=damp_names,
+                lower=space.lower[didx], upper=space.upper[didx], sets=ident, interaction=interaction,
+                n_rows=self.damping_rows, residual_threshold=float(self.residual_damping_threshold))
+            current[didx] = damping_result.values
+        after_stages = current.copy()
+        timings["damping_least_squares"] = time.perf_counter() - t
+
+        # 4. joint refinement of everything ----------------------------------------------------------------------
+        t = time.perf_counter()
+        if self.exact:
+            final, joint = self._refine_exact(model, space, ident_ref, current, (w_f, w_z, w_s))
+        else:
+            final, joint = self._refine(model, space, ident_ref, current, list(space.names), (w_f, w_z, w_s),
+                                        caught, keep=True)
+        timings["joint_refinement"] = time.perf_counter() - t
+        estimate: ParameterEstimate = joint.pop("estimate")
+
+        # 5. validation ------------------------------------------------------------------------------------------
+        t = time.perf_counter()
+        truth_vec = None if self.truth is None else model.vector(structure.resolve_parameters(
+            {**{n: float(v) for n, v in zip(model.parameter_names, space.base, strict=True)}, **dict(self.truth)}))
+        p_final = space.full(final)
+        n_perm = int(self.n_permutations) if len(damp_names) > 1 else 0
+        val_bar: Any = tqdm(total=len(data.sets) + n_perm, desc="validation", unit="model",
+                            disable=not self.progress)
+
+        def check(params: Array, k: int) -> ValidationResult:
+            out = validate_identification(model=model, params=params, reference=data,
+                                          position=data.sets[k].position, truth=truth_vec, overlay=self.overlay)
+            val_bar.update(1)
+            return out
+
+        held_result = None
+        if held is not None:
+            held_result = check(p_final, held)
+        ident_results = [check(p_final, k) for k in ident]
+        permuted: list[ValidationResult] = []
+        perm_info: list[dict[str, Any]] = []
+        if n_perm:
+            perm_rng = np.random.default_rng(int(seeds[2]))
+            didx = [space.names.index(n) for n in damp_names]
+            factors = final[didx] / space.start[didx]
+            target = held if held is not None else ident[0]
+            for _ in range(n_perm):
+                order = _derangement(len(didx), perm_rng)
+                p_perm = final.copy()
+                p_perm[didx] = space.start[didx] * factors[order]
+                permuted.append(check(space.full(p_perm), target))
+                perm_info.append({"assignment": {damp_names[i]: damp_names[o] for i, o in enumerate(order)},
+                                  "statistics": permuted[-1].statistics()})
+        val_bar.close()
+        timings["validation"] = time.perf_counter() - t
+        timings["total"] = time.perf_counter() - t_total
+
+        # result ---------------------------------------------------------------------------------------------------
+        self.gsa_ = gsa
+        self.subproblems_ = subproblems
+        self.damping_ = damping_result
+        self.validation_ = {"validation": held_result, "identification": ident_results, "permuted": permuted}
+        self.timings_ = timings
+        self.selection_ = selection
+        gsa_rows = []
+        for (j, r, c), row in table.items():
+            gsa_rows.append({"mode": r + 1, "position": dict(ident_ref.sets[j].position), "criterion": c,
+                             "reference_frequency": float(ident_ref.sets[j].frequency[r]),
+                             "significant": list(significant[(j, r, c)]),
+                             "ST": {n: float(v) for n, v in zip(space.names, row, strict=True)}})
+        costs = {"selection": refinement.get("cost_before"), "stiffness_refined": refinement.get("cost_after"),
+                 "after_damping_least_squares": joint.get("cost_before"), "final": joint.get("cost_after")}
+        diagnostics: dict[str, Any] = dict(estimate.diagnostics)
+        diagnostics.update({
+            "stiffness_unknowns": modal_names,
+            "damping_unknowns": damp_names,
+            "identification_positions": [dict(data.sets[k].position) for k in ident],
+            "validation_position": None if held is None else dict(data.sets[held].position),
+            "settings": {"n_gsa": int(self.n_gsa), "n_opt": n_opt, "threshold": float(self.threshold),
+                         "criteria": list(self.criteria), "weights": [w_f, w_z, w_s],
+                         "residual_damping_threshold": float(self.residual_damping_threshold),
+                         "exact": bool(self.exact), "noise": None if self.noise is None else list(self.noise),
+                         "objective": "subproblems: w_f NFD^2 + w_s (1 - MAC) of the MACXP-paired mode"},
+            "gsa": {"n": int(self.n_gsa), "model_runs": int(self.n_gsa) * (space.n + 2) * len(ident),
+                    "threshold": float(self.threshold), "outputs": gsa_rows},
+            "subproblems": [s.to_dict() for s in subproblems],
+            "selection": selection,
+            "not_searched": [n for n in modal_names if n not in selection],
+            "stiffness_refinement": refinement,
+            "damping": None if damping_result is None else damping_result.to_dict(),
+            "joint_refinement": joint,
+            "stages": {"selection": space.mapping(selected),
+                       "after_damping_least_squares": space.mapping(after_stages)},
+            "costs": costs,
+            "timings": timings,
+            "validation": {
+                "validation": None if held_result is None else held_result.to_dict(),
+                "identification": [v.to_dict() for v in ident_results],
+                "identification_statistics": _pooled(ident_results),
+                "permuted": perm_info,
+            },
+            "warnings": caught,
+        })
+        return replace(estimate, method=self.method, diagnostics=diagnostics)
+
+    def _refine(
+        self,
+        model: NumericModel,
+        space: ParameterSpace,
+        reference: ModalData,
+        current: Array,
+        names: list[str],
+        weights: tuple[float, float, float],
+        caught: list[str],
+        *,
+        keep: bool = False,
+    ) -> tuple[Array, dict[str, Any]]:
+        """Modal updating over ``names`` from ``current`` (other unknowns fixed); cost before/after, changes."""
+        fixed = {n: float(v) for n, v in zip(space.names, current, strict=True) if n not in names}
+        known = {n: float(v) for n, v in zip(model.parameter_names, space.base, strict=True)}
+        known.update(fixed)
+        idx = [space.names.index(n) for n in names]
+        bounds = {n: (float(space.lower[i]), float(space.upper[i])) for n, i in zip(names, idx, strict=True)}
+        start = {n: float(np.clip(current[i], space.lower[i], space.upper[i])) for n, i in zip(names, idx, strict=True)}
+        updater = ModalUpdatingEstimator(model, names, bounds=bounds, start=start, values=known, weights=weights)
+        sub_space = ParameterSpace.from_model(model, names, bounds=bounds, start=start, values=known)
+        problem = updater._problem(model, sub_space, reference)
+        r0 = problem.residuals(sub_space.start)
+        with warnings.catch_warnings(record=True) as record:
+            warnings.simplefilter("always")
+            updater.fit(reference)
+        caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
+        est = updater.estimate_
+        out = current.copy()
+        out[idx] = est.values
+        if keep:
+            _LAST_FIT.set((sub_space, problem.residuals, np.asarray(est.values, dtype=float)))
+        info: dict[str, Any] = {
+            "cost_before": float(r0 @ r0),
+            "cost_after": float(est.cost),
+            "success": bool(est.success),
+            "message": est.message,
+            "evaluations": est.diagnostics.get("evaluations"),
+            "relative_change": {n: float(est.values[k] / current[i] - 1.0) for k, (n, i) in
+                                enumerate(zip(names, idx, strict=True))},
+        }
+        if keep:
+            info["estimate"] = est
+        return out, info
+
+
+    def _refine_exact(
+        self,
+        model: NumericModel,
+        space: ParameterSpace,
+        reference: ModalData,
+        current: Array,
+        weights: tuple[float, float, float],
+    ) -> tuple[Array, dict[str, Any]]:
+        """Joint refinement of all unknowns on the model's exact complex modes (finite-difference Jacobian)."""
+        problem = ExactModalProblem(model, space, reference, weights, self.noise)
+        r0 = problem.residuals(current)
+        diagnostics = {"modes": "exact", "jacobian": "forward differences, batched"}
+        start = np.clip(current, space.lower, space.upper)
+        est = fit_least_squares(self.method, space, problem.residuals, problem.jacobian,
+                                starts=start[None, :], diagnostics=diagnostics)
+        info: dict[str, Any] = {
+            "cost_before": float(r0 @ r0),
+            "cost_after": float(est.cost),
+            "success": bool(est.success),
+            "message": est.message,
+            "evaluations": problem.evaluations,
+            "relative_change": {n: float(v / c - 1.0) for n, v, c in zip(space.names, est.values, current,
+                                                                          strict=True)},
+            "pairing": problem.pairing_report(np.asarray(est.values, dtype=float)),
+            "estimate": est,
+        }
+        return np.asarray(est.values, dtype=float), info
+
+
+class ExactModalProblem:
+    """Modal residuals of the exact complex modes over all unknowns, for the final joint refinement.
+
+    Per reference set and mode r, paired once per evaluation point with the model mode of largest MACXP
+    (one-to-one): ``sqrt(w_f) (f_m - f_r) / f_r``, ``sqrt(w_z) (zeta_m - zeta_r) / zeta_r`` and the real and
+    imaginary parts of ``sqrt(w_s) (a (a^H x) / (a^H a) - x)`` (complex model shape ``a``, unit reference shape
+    ``x``; its squared norm is ``1 - MAC``, invariant to the arbitrary complex scale of ``a``), with
+    ``f_m = |lambda| / 2 pi`` and ``zeta_m = -Re lambda / |lambda|`` as in cappe.modal/1 files. With
+    ``noise = (s_f, s_z, s_s)`` (the relative noise of frequencies and damping ratios, and of shape components
+    relative to each mode's largest, as ``cappe simulate`` adds it) the residuals are divided by their noise
+    standard deviations instead: ``s_f``, ``s_z`` and ``s_s max|x_r| / sqrt(2)``. The Jacobian
+    is by forward differences (relative step 1e-6), all unknowns perturbed in one batched evaluation per set,
+    with the pairing of the unperturbed point.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> space = ParameterSpace.from_model(nm, ["k11", "c11"])
+    >>> ref = ModalEngine(nm).modal_data()
+    >>> problem = ExactModalProblem(nm, space, ref, (1.0, 1.0, 1.0))
+    >>> float(np.abs(problem.residuals(space.start)).max()) < 1e-9
+    True
+    """
+
+    def __init__(self, model: NumericModel, space: ParameterSpace, reference: ModalData,
+                 weights: tuple[float, float, float], noise: Sequence[float] | None = None) -> None:
+        self.model = model
+        self.space = space
+        self.reference = reference
+        self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
+        self.engine = ModalEngine(model, sensors=list(reference.sensors))
+        self.positions = [model.structure.resolve_position(s.position) for s in reference.sets]
+        self.targets = [s.shapes / np.linalg.norm(s.shapes, axis=0, keepdims=True) for s in reference.sets]
+        # residual divisors per set: (frequency, damping, shape per mode)
+        self.divisors: list[tuple[float, float, Array]] = []
+        for x in self.targets:
+            if noise is None:
+                w_f, w_z, w_s = self.sqrt_w
+                div = (1 / w_f if w_f > 0 else 0.0, 1 / w_z if w_z > 0 else 0.0,
+                       np.full(x.shape[1], 1 / w_s if w_s > 0 else 0.0))
+            else:
+                s_f, s_z, s_s = (float(v) for v in noise)
+                div = (s_f, s_z, s_s * np.max(np.abs(x), axis=0) / np.sqrt(2))
+            self.divisors.append(div)
+        self.evaluations = 0
+        self._cache: dict[bytes, tuple[Array, list[NDArray[np.intp]]]] = {}
+
+    def _modes(self, params: Array, k: int) -> tuple[CArray, CArray]:
+        batch = self.engine.evaluate(params, self.positions[k], exact=True)
+        self.evaluations += params.shape[0]
+        assert batch.poles is not None  # exact=True
+        assert batch.complex_shapes is not None
+        return batch.poles, batch.complex_shapes
+
+    def _pairing(self, poles: CArray, shapes: CArray, data_set: ModalDataSet) -> NDArray[np.intp]:
+        valid = np.flatnonzero(np.isfinite(poles) & (np.abs(poles) > 0))
+        if valid.size < data_set.n_modes:
+            msg = (f"only {valid.size} oscillatory model modes at position {data_set.position}; the reference has "
+                   f"{data_set.n_modes}")
+            raise DataError(msg)
+        matrix = macxp(shapes[:, valid], poles[valid], data_set.shapes, data_set.poles)
+        rows, cols = linear_sum_assignment(matrix, maximize=True)
+        out = np.empty(data_set.n_modes, dtype=np.intp)
+        out[cols] = valid[rows]
+        return out
+
+    def _residual(self, poles: CArray, shapes: CArray, k: int, index: NDArray[np.intp]) -> Array:
+        """Residuals (B, n_r) of a batch with a fixed pairing."""
+        data_set = self.reference.sets[k]
+        lam = poles[:, index]
+        w = np.abs(lam)
+        f = w / (2 * np.pi)
+        zeta = -lam.real / w
+        a = shapes[:, :, index]  # (B, n_s, m)
+        x = self.targets[k]
+        c = np.sum(a.conj() * x[None], axis=1)  # a^H x
+        aa = np.sum(np.abs(a) ** 2, axis=1)
+        e = a * (c / aa)[:, None, :] - x[None]
+        d_f, d_z, d_s = self.divisors[k]
+        parts = []
+        if d_f > 0:
+            parts.append((f - data_set.frequency) / data_set.frequency / d_f)
+        if d_z > 0:
+            parts.append((zeta - data_set.damping) / data_set.damping / d_z)
+        if np.all(d_s > 0):
+            e = e / d_s[None, None, :]
+            parts.extend([e.real.reshape(e.shape[0], -1), e.imag.reshape(e.shape[0], -1)])
+        return np.concatenate(parts, axis=1)
+
+    def _evaluate(self, p: Array) -> tuple[Array, list[NDArray[np.intp]]]:
+        key = np.asarray(p, dtype=float).tobytes()
+        hit = self._cache.get(key)
+        if hit is not None:
+            return hit
+        full = self.space.full(p)[None, :]
+        res, pairs = [], []
+        for k, data_set in enumerate(self.reference.sets):
+            poles, shapes = self._modes(full, k)
+            index = self._pairing(poles[0], shapes[0], data_set)
+            pairs.append(index)
+            res.append(self._residual(poles, shapes, k, index)[0])
+        out = (np.concatenate(res), pairs)
+        self._cache = {key: out}
+        return out
+
+    def residuals(self, p: Array) -> Array:
+        """Residual vector at unknowns ``p`` (SI)."""
+        return self._evaluate(np.asarray(p, dtype=float))[0]
+
+    def jacobian(self, p: Array) -> Array:
+        """``d r / d p`` (n_r, n) by forward differences, one batched evaluation per set."""
+        p = np.asarray(p, dtype=float)
+        r0, pairs = self._evaluate(p)
+        h = 1e-6 * np.where(p != 0, np.abs(p), 1.0)
+        shifted = p[None, :] + np.diag(h)
+        full = self.space.full(shifted)
+        cols = []
+        for k in range(len(self.reference.sets)):
+            poles, shapes = self._modes(full, k)
+            cols.append(self._residual(poles, shapes, k, pairs[k]))
+        res = np.concatenate(cols, axis=1)  # (n, n_r)
+        return np.asarray(((res - r0[None, :]) / h[:, None]).T, dtype=float)
+
+    def pairing_report(self, p: Array) -> list[dict[str, Any]]:
+        """Per set: the model mode paired with each reference mode at ``p``."""
+        _, pairs = self._evaluate(np.asarray(p, dtype=float))
+        return [{"position": dict(s.position), "model_mode": idx.tolist()}
+                for s, idx in zip(self.reference.sets, pairs, strict=True)]
+
+
+def _alternative_starts(
+    subproblems: Sequence[SubproblemResult],
+    space: ParameterSpace,
+    selected: Array,
+    names: Sequence[str],
+    n_starts: int,
+) -> list[tuple[str, Array]]:
+    """Starts of the stiffness refinement: the paper's selection, then the consensus (each unknown's median over
+    the medians of all subproblems that determine it) and the rank-k selections (k-th least spread), distinct."""
+    per_name: dict[str, list[tuple[float, float]]] = {}
+    for sub in subproblems:
+        for i, n in enumerate(sub.parameters):
+            if n in names and np.isfinite(sub.spread[i]):
+                per_name.setdefault(n, []).append((float(sub.spread[i]), float(sub.median[i])))
+    for n in per_name:
+        per_name[n].sort()
+    out = [("selection", selected.copy())]
+    consensus = selected.copy()
+    for n, found in per_name.items():
+        consensus[space.names.index(n)] = float(np.median([v for _, v in found]))
+    out.append(("consensus", consensus))
+    k = 1
+    while len(out) < n_starts and any(len(v) > k for v in per_name.values()):
+        vector = selected.copy()
+        for n, found in per_name.items():
+            vector[space.names.index(n)] = found[min(k, len(found) - 1)][1]
+        out.append((f"rank {k}", vector))
+        k += 1
+    unique: list[tuple[str, Array]] = []
+    for label, vector in out[:max(n_starts, 1)]:
+        vector = np.clip(vector, space.lower, space.upper)
+        if not any(np.allclose(vector, v, rtol=1e-12, atol=0) for _, v in unique):
+            unique.append((label, vector))
+    return unique
+
+
+def _derangement(n: int, rng: np.random.Generator) -> NDArray[np.intp]:
+    """A random permutation with no fixed point (n >= 2)."""
+    while True:
+        order = rng.permutation(n)
+        if not np.any(order == np.arange(n)):
+            return order.astype(np.intp)
+
+
+def _pooled(results: Sequence[ValidationResult]) -> dict[str, dict[str, float]]:
+    """Statistics over several positions at once (paper Tables 2 and 4)."""
+    if not results:
+        return {}
+    out = {}
+    for c in ("frac", "csf", "macxp", "ndd"):
+        out[c] = summarize(np.concatenate([r.values(c) for r in results]), larger_is_better=c != "ndd")
+    return out

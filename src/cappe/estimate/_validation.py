@@ -1,0 +1,368 @@
+"""Validation of an identified model against reference modes at one axis position (paper Tables 2-5, Fig. 7).
+
+Modal criteria, per reference mode r paired with the model mode of largest MACXP (one-to-one assignment):
+
+- ``macxp[r]``: MACXP (paper eq. 4) of the pair, from the model's exact complex modes by default;
+- ``nfd[r] = |f_m - f_r| / f_r`` and ``ndd[r] = |zeta_m - zeta_r| / zeta_r`` (eq. 5 without the square).
+
+FRF criteria, per frequency response function (output channel j, input channel k), over ``freq``:
+
+- ``frac[j, k]``: the frequency response assurance criterion of the two FRFs (:func:`cappe.correlate.frac`);
+- ``csf[j, k]``: the cross-signature scale factor of the single FRF (:func:`cappe.correlate.csf` with one output),
+  ``2 |H_x H_a| / (|H_x|^2 + |H_a|^2)``, averaged over the frequency lines: 1 only where the amplitudes agree.
+
+Outputs and inputs are the reference's sensor channels (``"node:x"``): a unit force at the sensor point along the
+channel direction, the displacement response (receptance, m/N) along the output channel. Two definitions of the
+two FRF sets, stated in ``frf_source``:
+
+- ``"truth"`` (the reference was simulated from known parameters): both are the full model's receptances, at the
+  true and at the identified parameters (all modes, viscous, hysteretic and gyroscopic terms);
+- ``"modal synthesis"`` (no truth): both are modal sums over the reference modes,
+  ``H_jk = sum_r psi_jr psi_kr / (omega_r^2 - omega^2 + 2 i zeta_r omega_r omega)``, with the reference's shapes
+  (which must be mass-normalized, as ``cappe simulate`` writes them) and with the paired model modes (exact
+  complex modes with ``exact``, else the first-order ones), frequency ``|lambda| / 2 pi`` and damping ratio
+  ``-Re lambda / |lambda|``.
+
+FRFs whose reference power ``sum_f |H|^2`` is below ``1e-10`` of the largest (zero by symmetry: an x force on a
+symmetric structure seen in y) are left out (NaN), as FRAC and CSF of numerical noise mean nothing.
+
+Statistics (``statistics()``) follow the paper: worst, the 5 % worst tail (5th percentile of the similarity
+criteria FRAC, CSF, MACXP; 95th percentile of the error NDD), mean and median, over modes (MACXP, NDD) or over
+FRFs (FRAC, CSF).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
+
+from cappe.correlate import csf, frac, macxp
+from cappe.exceptions import DataError
+from cappe.io.modal import ModalData, ModalDataSet
+from cappe.modal import ModalEngine
+from cappe.model import NumericModel, Structure
+
+__all__ = ["ValidationResult", "find_set", "model_receptance", "summarize", "validate_identification"]
+
+Array = NDArray[np.float64]
+CArray = NDArray[np.complex128]
+
+#: FRFs whose reference power is below this fraction of the largest are numerically zero and left out.
+NEGLIGIBLE_POWER = 1e-10
+#: Criteria where larger is better (their 5 % tail is the 5th percentile; the others' the 95th).
+SIMILARITY = ("frac", "csf", "macxp")
+
+
+@dataclass(frozen=True)
+class ValidationResult:
+    """Agreement of a model with reference modes (and FRFs) at one axis position.
+
+    Attributes
+    ----------
+    position : dict
+        Axis position.
+    reference_frequency : ndarray, shape (m,)
+        Reference natural frequencies (Hz).
+    model_mode : ndarray of int, shape (m,)
+        Model mode (ascending frequency, 0-based) paired with each reference mode.
+    model_frequency : ndarray, shape (m,)
+        Natural frequency of the paired model mode (Hz).
+    macxp, nfd, ndd : ndarray, shape (m,)
+        MACXP, natural frequency difference and natural damping difference of each pair (dimensionless).
+    macxp_matrix : ndarray, shape (n_model, m)
+        MACXP of the lowest model modes (rows) with every reference mode (columns).
+    freq : ndarray, shape (n_freq,)
+        Frequency lines of the FRF criteria (Hz).
+    outputs, inputs : tuple of str
+        Channels of the FRFs.
+    frac, csf : ndarray, shape (n_out, n_in)
+        FRF criteria per output and input channel (NaN where the reference FRF is negligible).
+    frf_source : str
+        ``"truth"`` or ``"modal synthesis"`` (see the module notes).
+    overlay : dict
+        One FRF for plots: ``output``, ``input`` (the driving point with the largest response) and the arrays
+        ``reference`` and ``model`` (complex, shape (n_freq,), m/N).
+    """
+
+    position: dict[str, float]
+    reference_frequency: Array
+    model_mode: NDArray[np.intp]
+    model_frequency: Array
+    macxp: Array
+    nfd: Array
+    ndd: Array
+    macxp_matrix: Array
+    freq: Array
+    outputs: tuple[str, ...]
+    inputs: tuple[str, ...]
+    frac: Array
+    csf: Array
+    frf_source: str
+    overlay: Mapping[str, Any]
+
+    def values(self, criterion: str) -> Array:
+        """The finite values of one criterion (``frac``, ``csf``, ``macxp``, ``ndd``, ``nfd``), flattened."""
+        if criterion not in ("frac", "csf", "macxp", "ndd", "nfd"):
+            msg = f"criterion must be one of frac, csf, macxp, ndd, nfd; got {criterion!r}"
+            raise DataError(msg)
+        arr = np.asarray(getattr(self, criterion), dtype=float).ravel()
+        return np.asarray(arr[np.isfinite(arr)], dtype=float)
+
+    def statistics(self) -> dict[str, dict[str, float]]:
+        """``{criterion: {"worst", "p5", "mean", "median"}}`` for FRAC, CSF, MACXP and NDD (fractions, not %).
+
+        ``p5`` is the 5 % worst tail: the 5th percentile of FRAC, CSF and MACXP, the 95th of NDD.
+        """
+        return {c: summarize(self.values(c), larger_is_better=c in SIMILARITY) for c in ("frac", "csf", "macxp", "ndd")}
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "position": dict(self.position),
+            "statistics": self.statistics(),
+            "frf_source": self.frf_source,
+            "modes": {
+                "reference_frequency": self.reference_frequency.tolist(),
+                "model_mode": self.model_mode.tolist(),
+                "model_frequency": self.model_frequency.tolist(),
+                "macxp": self.macxp.tolist(),
+                "nfd": self.nfd.tolist(),
+                "ndd": self.ndd.tolist(),
+            },
+            "frf": {
+                "outputs": list(self.outputs),
+                "inputs": list(self.inputs),
+                "band": [float(self.freq[0]), float(self.freq[-1])],
+                "n_freq": int(self.freq.size),
+                "frac": [[None if not np.isfinite(v) else float(v) for v in row] for row in self.frac],
+                "csf": [[None if not np.isfinite(v) else float(v) for v in row] for row in self.csf],
+                "overlay": {"output": self.overlay["output"], "input": self.overlay["input"]},
+            },
+        }
+
+
+def summarize(values: ArrayLike, *, larger_is_better: bool) -> dict[str, float]:
+    """Worst value, 5 % worst tail, mean and median of a criterion (NaN when there are no values).
+
+    Examples
+    --------
+    >>> summarize([0.9, 1.0, 0.8], larger_is_better=True)["worst"]
+    0.8
+    """
+    v = np.asarray(values, dtype=float).ravel()
+    v = v[np.isfinite(v)]
+    if v.size == 0:
+        nan = float("nan")
+        return {"worst": nan, "p5": nan, "mean": nan, "median": nan}
+    worst = float(v.min() if larger_is_better else v.max())
+    tail = float(np.percentile(v, 5 if larger_is_better else 95))
+    return {"worst": worst, "p5": tail, "mean": float(v.mean()), "median": float(np.median(v))}
+
+
+def find_set(reference: ModalData, position: Mapping[str, float], model: NumericModel) -> int:
+    """Index of the reference set at ``position`` (axis values compared to 1e-9 m); DataError naming the positions."""
+    wanted = model.position_vector(model.structure.resolve_position(position))
+    for k, data_set in enumerate(reference.sets):
+        have = model.position_vector(model.structure.resolve_position(data_set.position))
+        if np.allclose(have, wanted, rtol=0, atol=1e-9):
+            return k
+    known = [dict(s.position) for s in reference.sets]
+    msg = f"position {dict(position)} is not among the reference's positions {known}"
+    raise DataError(msg)
+
+
+def _poles(freq: Array, zeta: Array) -> CArray:
+    w = 2 * np.pi * freq
+    return np.asarray(-zeta * w + 1j * w * np.sqrt(np.clip(1 - zeta**2, 0, None)), dtype=complex)
+
+
+def model_receptance(
+    model: NumericModel,
+    params: ArrayLike,
+    position: Mapping[str, float] | None,
+    freq: ArrayLike,
+    outputs: Sequence[str],
+    inputs: Sequence[str],
+) -> CArray:
+    """Receptance (m/N) between sensor channels of the full model: ``H[out, in, freq]``.
+
+    ``H = S_out (K + i H + i omega (C + G) - omega^2 M)^-1 S_in^T``, where ``S`` are the sensor rows of the
+    channels (a unit force at the sensor point along the channel's direction).
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> H = model_receptance(nm, nm.nominal, None, [0.0], ["n1:x"], ["n1:x"])
+    >>> bool(np.isclose(H[0, 0, 0].real, np.linalg.inv(nm.matrices()["K"])[0, 0]))
+    True
+    """
+    p = np.asarray(params, dtype=float)
+    labels, rows = model.sensor_matrix(p, position)
+    index = {lab: i for i, lab in enumerate(labels)}
+    missing = [c for c in (*outputs, *inputs) if c not in index]
+    if missing:
+        msg = f"channels {sorted(set(missing))} are not sensor channels of model '{model.structure.name}'"
+        raise DataError(msg)
+    s_out = rows[[index[c] for c in outputs]]
+    s_in = rows[[index[c] for c in inputs]]
+    mats = model.matrices(p, position)
+    omega = 2 * np.pi * np.asarray(freq, dtype=float)
+    stiff = mats["K"] + 1j * mats["H"]
+    damp = mats["C"] + mats["G"]
+    dyn = stiff[None] + 1j * omega[:, None, None] * damp[None] - omega[:, None, None] ** 2 * mats["M"][None]
+    n, n_in = s_in.shape[1], s_in.shape[0]
+    x = np.linalg.solve(dyn, np.broadcast_to(s_in.T.astype(complex), (omega.size, n, n_in)))  # (n_f, n, n_in)
+    # one GEMM over all lines (a broadcast real @ complex matmul takes numpy's slow non-BLAS loop)
+    h = s_out.astype(complex) @ np.transpose(x, (1, 0, 2)).reshape(n, -1)  # (n_out, n_f * n_in)
+    return np.ascontiguousarray(np.transpose(h.reshape(-1, omega.size, n_in), (0, 2, 1)))
+
+
+def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, out_idx: Sequence[int],
+               in_idx: Sequence[int]) -> CArray:
+    """Modal sum ``sum_r psi_jr psi_kr / (w_r^2 - w^2 + 2 i zeta_r w_r w)``: (n_out, n_in, n_freq)."""
+    psi = np.asarray(shapes)
+    wr = 2 * np.pi * freq_modes
+    w = 2 * np.pi * freq
+    den = wr[None, :] ** 2 - w[:, None] ** 2 + 2j * zeta[None, :] * wr[None, :] * w[:, None]  # (n_f, m)
+    a = psi[list(out_idx)]  # (n_out, m)
+    b = psi[list(in_idx)]
+    return np.asarray(np.einsum("jr,kr,fr->jkf", a, b, 1.0 / den), dtype=complex)
+
+
+def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet) -> tuple[NDArray[np.intp], Array]:
+    """One-to-one pairing by MACXP (maximal total); returns the model mode of each reference mode and the matrix."""
+    valid = np.isfinite(model_poles) & (np.abs(model_poles) > 0)
+    idx = np.flatnonzero(valid)
+    if idx.size < data_set.n_modes:
+        msg = (f"only {idx.size} elastic model modes at position {data_set.position}; the reference has "
+               f"{data_set.n_modes}")
+        raise DataError(msg)
+    matrix = macxp(model_shapes[:, idx], model_poles[idx], data_set.shapes, data_set.poles)
+    rows, cols = linear_sum_assignment(matrix, maximize=True)
+    model_of = np.empty(data_set.n_modes, dtype=np.intp)
+    model_of[cols] = idx[rows]
+    full = np.zeros((model_poles.size, data_set.n_modes))
+    full[idx] = matrix
+    return model_of, full
+
+
+def validate_identification(
+    *,
+    model: NumericModel | Structure,
+    params: ArrayLike | Mapping[str, float],
+    reference: ModalData,
+    position: Mapping[str, float] | None = None,
+    truth: ArrayLike | Mapping[str, float] | None = None,
+    inputs: Sequence[str] | None = None,
+    freq: ArrayLike | None = None,
+    n_freq: int = 600,
+    exact: bool = True,
+    overlay: tuple[str, str] | None = None,
+) -> ValidationResult:
+    """FRAC, CSF, MACXP and NDD of a model against reference modes at one position (see the module notes).
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+    params : array (n_params,) or mapping
+        The identified model's full parameter vector (or overrides of the nominal values).
+    reference : ModalData
+        Reference modes; the set at ``position`` is used (default: the first set).
+    position : mapping, optional
+        Axis position of the set to validate against.
+    truth : array (n_params,) or mapping, optional
+        Parameters the reference was simulated from: the reference FRFs are then the model's at ``truth``.
+    inputs : sequence of str, optional
+        Input channels of the FRFs (default: every reference channel).
+    freq : array_like, optional
+        Frequency lines (Hz) of the FRF criteria (default ``n_freq`` lines up to 1.25 times the highest reference
+        frequency).
+    n_freq : int
+        Number of default frequency lines.
+    exact : bool
+        Compare the model's exact complex modes (default) rather than its first-order ones.
+    overlay : (str, str), optional
+        Output and input channel of the FRF kept for plots (default: the driving point with the largest peak).
+
+    Returns
+    -------
+    ValidationResult
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> rig = load_model("builtin:two-mass-rig")
+    >>> ref = ModalEngine(rig).modal_data()
+    >>> res = validate_identification(model=rig, params={}, reference=ref, truth={})
+    >>> res.statistics()["frac"]["worst"] > 0.999999, res.statistics()["ndd"]["worst"] < 1e-9
+    (True, True)
+    """
+    nm = model if isinstance(model, NumericModel) else NumericModel(model)
+    k = 0 if position is None else find_set(reference, position, nm)
+    data_set = reference.sets[k]
+    pos = nm.structure.resolve_position(data_set.position)
+    p = nm.vector(params if isinstance(params, Mapping) else np.asarray(params, dtype=float))
+    sensors = list(reference.sensors)
+    engine = ModalEngine(nm, sensors=sensors)
+    batch = engine.evaluate(p, pos, exact=exact)
+    if exact and batch.poles is not None and batch.complex_shapes is not None:
+        shapes: CArray = batch.complex_shapes[0]
+        poles: CArray = batch.poles[0]
+    else:
+        shapes = batch.shapes[0].astype(complex)
+        poles = batch.first_order_poles[0]
+    model_of, matrix = _pair(shapes, poles, data_set)
+    omega_m = np.abs(poles[model_of])
+    f_model = omega_m / (2 * np.pi)
+    zeta_model = -poles[model_of].real / omega_m
+    values = matrix[model_of, np.arange(data_set.n_modes)]
+    nfd = np.abs(f_model - data_set.frequency) / data_set.frequency
+    ndd = np.abs(zeta_model - data_set.damping) / np.where(data_set.damping > 0, data_set.damping, np.nan)
+    n_show = min(poles.size, max(data_set.n_modes + 4, int(model_of.max()) + 1))
+
+    f_grid = (np.linspace(0.0, 1.25 * float(data_set.frequency.max()), n_freq + 1)[1:] if freq is None
+              else np.asarray(freq, dtype=float))
+    channels_in = list(inputs) if inputs is not None else sensors
+    unknown = [c for c in channels_in if c not in sensors]
+    if unknown:
+        msg = f"FRF input channels {unknown} are not reference sensor channels {sensors}"
+        raise DataError(msg)
+    in_idx = [sensors.index(c) for c in channels_in]
+    if truth is not None:
+        t = nm.vector(truth if isinstance(truth, Mapping) else np.asarray(truth, dtype=float))
+        h_ref = model_receptance(nm, t, pos, f_grid, sensors, channels_in)
+        h_mod = model_receptance(nm, p, pos, f_grid, sensors, channels_in)
+        source = "truth"
+    else:
+        h_ref = _synthesis(data_set.shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)), in_idx)
+        h_mod = _synthesis(shapes[:, model_of], f_model, zeta_model, f_grid, range(len(sensors)), in_idx)
+        source = "modal synthesis"
+    power = np.sum(np.abs(h_ref) ** 2, axis=-1)
+    keep = power > NEGLIGIBLE_POWER * power.max()
+    frac_v = np.full(power.shape, np.nan)
+    csf_v = np.full(power.shape, np.nan)
+    if np.any(keep):
+        frac_v[keep] = frac(h_mod[keep], h_ref[keep])
+        csf_v[keep] = np.mean(csf(h_mod[keep][None], h_ref[keep][None]), axis=-1)
+    if overlay is not None:
+        if overlay[0] not in sensors or overlay[1] not in channels_in:
+            msg = f"overlay {overlay} must name a reference channel and an FRF input channel {channels_in}"
+            raise DataError(msg)
+        o_best, i_best = sensors.index(overlay[0]), channels_in.index(overlay[1])
+    else:
+        drive = [(sensors.index(c), j) for j, c in enumerate(channels_in)]
+        peak = [float(np.max(np.abs(h_ref[o, i]))) for o, i in drive]
+        o_best, i_best = drive[int(np.argmax(peak))]
+    kept = {"output": sensors[o_best], "input": channels_in[i_best], "reference": h_ref[o_best, i_best],
+            "model": h_mod[o_best, i_best]}
+    return ValidationResult(
+        position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
+        model_frequency=f_model, macxp=values, nfd=nfd, ndd=ndd, macxp_matrix=matrix[:n_show], freq=f_grid,
+        outputs=tuple(sensors), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
+        overlay=kept,
+    )

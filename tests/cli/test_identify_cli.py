@@ -1,0 +1,173 @@
+"""``cappe identify``: end to end on a small position-dependent model, and its error exits."""
+
+from __future__ import annotations
+
+import argparse
+import json
+from collections.abc import Sequence
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cappe.cli import identify
+from cappe.cli._common import EXIT_USAGE, run_guarded
+from cappe.io import write_modal_data
+from cappe.io.modal import ModalData, ModalDataSet
+from cappe.modal import ModalEngine
+from cappe.model import NumericModel, load_model
+
+MODEL = """
+format: cappe.model/1
+name: mini-slide
+parameters:
+  - {name: mb, value: 300.0, unit: kg, kind: mass}
+  - {name: mt, value: 60.0, unit: kg, kind: mass}
+  - {name: me_kx, value: 6.0e7, unit: N/m, kind: stiffness, bounds: [4.2e7, 7.8e7], unknown: true}
+  - {name: me_ky, value: 1.2e8, unit: N/m, kind: stiffness, bounds: [0.84e8, 1.56e8], unknown: true}
+  - {name: me_kz, value: 5.0e7, unit: N/m, kind: stiffness, bounds: [3.5e7, 6.5e7], unknown: true}
+  - {name: lgs_k, value: 2.0e8, unit: N/m, kind: stiffness, bounds: [1.4e8, 2.6e8], unknown: true}
+  - {name: bsd_kz, value: 1.0e8, unit: N/m, kind: stiffness, bounds: [0.7e8, 1.3e8], unknown: true}
+  - {name: me_by, value: 6.0e3, unit: N s/m, kind: damping, bounds: [2.0e3, 1.8e4], unknown: true}
+  - {name: me_dx, value: 0.04, unit: '1', kind: loss, bounds: [0.0133333, 0.12], unknown: true}
+  - {name: lgs_bx, value: 2.0e3, unit: N s/m, kind: damping, bounds: [666.667, 6.0e3], unknown: true}
+  - {name: bsd_bz, value: 3.0e3, unit: N s/m, kind: damping}
+axes:
+  - {name: z, positions: [-0.2, 0.0, 0.25]}
+bodies:
+  - {name: bed, mass: mb, inertia: {xx: 30.0, yy: 45.0, zz: 25.0}}
+  - {name: table, mass: mt, inertia: {xx: 1.5, yy: 2.5, zz: 2.0}, position: [0, 0.3, z]}
+elements:
+  - {name: me1, bodies: [ground, bed], at: [-0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me_ky, z: me_kz},
+     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
+  - {name: me2, bodies: [ground, bed], at: [0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me_ky, z: me_kz},
+     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
+  - {name: me3, bodies: [ground, bed], at: [0.0, -0.3, 0.6], stiffness: {x: me_kx, y: me_ky, z: me_kz},
+     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
+  - {name: shoe1, bodies: [bed, table], at: [-0.2, 0.2, z - 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
+     damping: {x: lgs_bx, y: lgs_bx}}
+  - {name: shoe2, bodies: [bed, table], at: [0.2, 0.2, z - 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
+     damping: {x: lgs_bx, y: lgs_bx}}
+  - {name: shoe3, bodies: [bed, table], at: [-0.2, 0.2, z + 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
+     damping: {x: lgs_bx, y: lgs_bx}}
+  - {name: shoe4, bodies: [bed, table], at: [0.2, 0.2, z + 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
+     damping: {x: lgs_bx, y: lgs_bx}}
+  - {name: bsd, bodies: [bed, table], at: [0.0, 0.2, z], stiffness: {z: bsd_kz}, damping: {z: bsd_bz}}
+sensors:
+  - {name: bed1, body: bed, point: [-0.6, 0.0, -0.5]}
+  - {name: bed2, body: bed, point: [0.6, 0.0, -0.5]}
+  - {name: bed3, body: bed, point: [0.0, 0.2, 0.6]}
+  - {name: tool, body: table, point: [0.0, 0.1, 0.0]}
+  - {name: table2, body: table, point: [0.2, 0.0, 0.1]}
+"""
+
+TRUTH = {"me_kx": 7.1e7, "me_ky": 0.95e8, "me_kz": 4.1e7, "lgs_k": 2.3e8, "bsd_kz": 0.8e8,
+         "me_by": 1.1e4, "me_dx": 0.025, "lgs_bx": 1.2e3}
+
+
+def cli(argv: Sequence[str]) -> int:
+    """``cappe identify ...`` through the command's own parser and the CLI's error handling (as ``cappe.cli.main``)."""
+    parser = argparse.ArgumentParser(prog="cappe")
+    sub = parser.add_subparsers(dest="command", required=True)
+    identify.register(sub)
+    try:
+        args = parser.parse_args(list(argv))
+    except SystemExit as exc:
+        return int(exc.code) if isinstance(exc.code, int) else EXIT_USAGE
+    return run_guarded(args.func, args)
+
+
+@pytest.fixture(scope="module")
+def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
+    folder = tmp_path_factory.mktemp("identify")
+    model = folder / "mini.yaml"
+    model.write_text(MODEL)
+    nm = NumericModel(load_model(model))
+    reference = ModalEngine(nm).modal_data([{"z": z} for z in (-0.2, 0.0, 0.25)], params=TRUTH)
+    write_modal_data(folder / "ref.json", reference)
+    (folder / "truth.json").write_text(json.dumps(TRUTH))
+    s = reference.sets[0]
+    bad_sensor = ModalData(("bed1:x", "nose:x"), (ModalDataSet(s.position, s.frequency, s.damping, s.shapes[:2]),))
+    write_modal_data(folder / "bad_sensor.json", bad_sensor)
+    many = ModalData(reference.sensors, (ModalDataSet(s.position, np.tile(s.frequency, 2), np.tile(s.damping, 2),
+                                                      np.tile(s.shapes, (1, 2))),))
+    write_modal_data(folder / "many.json", many)
+    return {"folder": folder, "model": model, "ref": folder / "ref.json", "truth": folder / "truth.json",
+            "bad_sensor": folder / "bad_sensor.json", "many": folder / "many.json"}
+
+
+def test_identify_end_to_end(files, capsys):
+    out = files["folder"] / "result.json"
+    report = files["folder"] / "report.html"
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--truth", str(files["truth"]),
+                "--n-gsa", "32", "--n-opt", "6", "--seed", "2", "--workers", "1", "--permutations", "2",
+                "--overlay", "tool:x,bed1:y", "-o", str(out), "--report", str(report)])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    text = captured.out
+    # the held-out position defaults to the reference's first one
+    assert "validation position: {'z': -0.2}" in text
+    assert "worst |error|" in text
+    assert "runtime: gsa" in text
+    assert "permuted damping (2 reassignments)" in text
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "cappe.estimate/1"
+    assert doc["method"] == "automated-gsa"
+    assert set(doc["parameters"]) == set(TRUTH)
+    for name, value in doc["parameters"].items():
+        # ideal case (exact modes of the truth, no noise): the issue's 1 % / 5 % criteria, achieved ~1e-9
+        assert value == pytest.approx(TRUTH[name], rel=0.01 if name.endswith(("kx", "ky", "kz", "_k")) else 0.05)
+    assert doc["diagnostics"]["timings"]["total"] > 0
+    held = doc["diagnostics"]["validation"]["validation"]
+    assert held["frf"]["overlay"] == {"output": "tool:x", "input": "bed1:y"}
+    assert held["statistics"]["frac"]["worst"] == pytest.approx(1.0, abs=1e-6)  # recovered model
+    assert doc["diagnostics"]["gsa"]["outputs"]
+    page = report.read_text()
+    assert page.startswith("<!DOCTYPE html>")
+    assert page.count("data:image/png;base64,") >= 5  # histograms, sensitivity map, Sobol bars, FRF, MACXP
+    assert "held-out position z = -0.2" in page
+
+
+def test_identify_json_without_hold_out(files, capsys):
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--validation", "none",
+                "--unknowns", "me_kx,me_kz,me_by", "--n-gsa", "16", "--n-opt", "3", "--workers", "1",
+                "--permutations", "0", "--json"])
+    captured = capsys.readouterr()
+    assert code == 0, captured.err
+    doc = json.loads(captured.out)
+    assert list(doc["parameters"]) == ["me_kx", "me_kz", "me_by"]
+    assert doc["diagnostics"]["validation_position"] is None
+    assert len(doc["diagnostics"]["identification_positions"]) == 3
+
+
+def test_identify_names_sensors_that_do_not_fit(files, capsys):
+    code = cli(["identify", str(files["model"]), "--reference", str(files["bad_sensor"]), "--n-gsa", "8"])
+    assert code == 1
+    assert "reference sensors ['nose:x'] are not sensor channels of model 'mini-slide'" in capsys.readouterr().err
+
+
+def test_identify_names_modes_and_positions_that_do_not_fit(files, capsys):
+    code = cli(["identify", str(files["model"]), "--reference", str(files["many"]), "--n-gsa", "8"])
+    assert code == 1
+    assert "reference set 0 (position {'z': -0.2}) has 24 modes; model 'mini-slide' has only 12" in capsys.readouterr().err
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--validation", "z=-0.294"])
+    assert code == 1
+    assert "position {'z': -0.294} is not among the reference's positions" in capsys.readouterr().err
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--validation", "x=0.1"])
+    assert code == 1
+    assert "unknown axis 'x'" in capsys.readouterr().err
+
+
+def test_identify_usage_errors(files, capsys):
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--noise", "0.1,0.2"])
+    assert code == EXIT_USAGE
+    assert "--noise must be three numbers > 0" in capsys.readouterr().err
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--overlay", "tool:x"])
+    assert code == EXIT_USAGE
+    assert "--overlay must look like OUT,IN" in capsys.readouterr().err
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--n-opt", "0"])
+    assert code == EXIT_USAGE
+    assert "--n-opt must be >= 1; got 0" in capsys.readouterr().err
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--set", "nope=1"])
+    assert code == 1
+    assert "unknown parameter 'nope'" in capsys.readouterr().err
