@@ -88,3 +88,14 @@ def test_clipping_detection():
     hammer[100:105] = np.sin(np.pi * np.arange(1, 6) / 6)
     designed = TimeData.from_channels(t, {"prbs_like": two_level, "hammer": hammer})
     assert check_clipping(designed) == {}
+
+
+def test_written_files_get_the_usual_permissions(tmp_path):
+    import os
+
+    from cappe.io import write_json
+
+    path = write_json(tmp_path / "a.json", {"x": 1})
+    mask = os.umask(0)
+    os.umask(mask)
+    assert path.stat().st_mode & 0o777 == 0o666 & ~mask  # not mkstemp's 0600
