@@ -135,9 +135,18 @@ def test_result_round_trip_and_nulls(tmp_path):
         read_estimate(tmp_path / "none.json")
 
 
-def test_estimator_before_fit(two_mass):
-    with pytest.raises(NotFittedError, match=r"Estimator is not fitted yet; call fit\(data\) first"):
-        _ = Estimator(two_mass).estimate_
+class _Minimal(Estimator):
+    method = "minimal"
+
+    def _fit(self, model, space, data, rng):
+        return fit_least_squares(self.method, space, lambda p: p / space.start - 1)
+
+
+def test_estimator_is_abstract_and_unfitted_use_is_an_error(two_mass):
+    with pytest.raises(TypeError, match="abstract"):
+        Estimator(two_mass)
+    with pytest.raises(NotFittedError, match=r"_Minimal is not fitted yet; call fit\(data\) first"):
+        _ = _Minimal(two_mass).estimate_
 
 
 @pytest.mark.parametrize("strategy", ["multistart", "differential-evolution"])

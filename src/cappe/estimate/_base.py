@@ -8,6 +8,7 @@ them before ``fit`` raises :class:`~cappe.exceptions.NotFittedError`. The result
 from __future__ import annotations
 
 import warnings
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from contextvars import ContextVar
 from typing import Any, ClassVar
@@ -33,7 +34,7 @@ Residuals = Callable[[Array], Array]
 _LAST_FIT: ContextVar[tuple[ParameterSpace, Residuals, Array] | None] = ContextVar("_LAST_FIT", default=None)
 
 
-class Estimator:
+class Estimator(ABC):
     """Base class: ``Estimator(model, unknowns, bounds=..., start=..., values=..., rng=...).fit(data)``.
 
     Parameters
@@ -94,10 +95,11 @@ class Estimator:
         self._estimate = result
         return self
 
+    @abstractmethod
     def _fit(
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
     ) -> ParameterEstimate:
-        raise NotImplementedError
+        """The method itself: validate ``data`` and estimate the unknowns of ``space``."""
 
     @property
     def estimate_(self) -> ParameterEstimate:

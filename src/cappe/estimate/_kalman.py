@@ -59,6 +59,7 @@ scaling. The tests use it as the independent reference for the filter equations.
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -639,8 +640,9 @@ class _KalmanEstimator(Estimator):
         newton = np.asarray(np.linalg.solve(_symmetric(regular), gradient)[:nt], dtype=float)
         return _symmetric(np.linalg.inv(info + np.diag(1.0 / prior_var))), info, newton
 
+    @abstractmethod
     def _run(self, aug: _Augmented, z0: Array, p0: Array, q: Array, r: Array, w: Array, y: Array) -> _Pass:
-        raise NotImplementedError
+        """One forward pass of the filter over the record."""
 
     def _result(
         self,

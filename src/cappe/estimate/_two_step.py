@@ -57,6 +57,7 @@ rig they were within a factor of about 3 of the observed scatter, either way).
 
 from __future__ import annotations
 
+from abc import abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar
@@ -544,10 +545,11 @@ class _TwoStep(Estimator):
             diagnostics=diagnostics,
         )
 
+    @abstractmethod
     def _residuals(
         self, engine: _ModelTF, tfs: Sequence[TransferFunctionModel], weights: Array
     ) -> tuple[Callable[[Array], Array], Callable[[Array], Array], dict[str, Any]]:
-        raise NotImplementedError
+        """Residuals, their Jacobian and diagnostics of the variant's comparison."""
 
 
 def _sobol_starts(space: ParameterSpace, n_starts: int, rng: np.random.Generator) -> Array:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import math
 import warnings
+from abc import ABC, abstractmethod
 from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import Any, ClassVar, Self
@@ -602,7 +603,7 @@ def _channel(data: TimeData, name: str, role: str) -> Array:
 # the estimators
 
 
-class PolynomialModel:
+class PolynomialModel(ABC):
     """Common base of the polynomial black-box estimators (scikit-learn conventions).
 
     Learned attributes (after :meth:`fit`): ``A_``, ``B_`` (one array per input), ``C_``, ``D_``, ``F_`` (one
@@ -623,16 +624,19 @@ class PolynomialModel:
     max_iter: int
     tol: float
 
-    # -- to be provided by each structure ---------------------------------------------------------------------
+    # -- provided by each structure ---------------------------------------------------------------------------
+    @abstractmethod
     def _orders(self, n_inputs: int) -> _Orders:
-        raise NotImplementedError
+        """Polynomial orders and delays of this structure for ``n_inputs`` inputs."""
 
     def _start(self, y: Array, u: Array, o: _Orders) -> _Polys:
-        raise NotImplementedError
+        """Initial polynomials of the prediction-error search (default: the output-error start; ARX overrides the
+        whole fit, ARMAX and BJ add their noise models)."""
+        return _output_error_start(y, u, o)
 
+    @abstractmethod
     def get_params(self) -> dict[str, Any]:
         """The settings given to ``__init__``."""
-        raise NotImplementedError
 
     def __repr__(self) -> str:
         args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
@@ -1173,9 +1177,6 @@ class OE(PolynomialModel):
         nk = _per_input(self.nk, "nk", 0, n_inputs, "OE")
         _check_iteration(self.max_iter, self.tol, "OE")
         return _Orders(0, nb, 0, 0, nf, nk)
-
-    def _start(self, y: Array, u: Array, o: _Orders) -> _Polys:
-        return _output_error_start(y, u, o)
 
 
 class BoxJenkins(PolynomialModel):
