@@ -214,6 +214,21 @@ def test_non_convergence_warns_and_sets_success_false():
     assert "no convergence in 1 iterations" in model.message_
 
 
+def test_input_without_excitation_warns_instead_of_failing():
+    # a zero input leaves the output-error predictor independent of B and F: the search must stop and say so
+    y = np.random.default_rng(15).standard_normal(400)
+    data = TimeData.from_rate(1.0, {"u": np.zeros(400), "y": y})
+    with (
+        pytest.warns(
+            ConvergenceWarning, match=r"OE\(nb=1, nf=1, nk=1\) did not converge: the prediction errors do not"
+        ),
+        pytest.warns(IllConditionedWarning, match="the parameters are not all identifiable"),
+    ):
+        model = OE(1, 1).fit(data, inputs="u", output="y")
+    assert model.success_ is False
+    assert np.all(np.isinf(model.parameter_std_))
+
+
 def test_rank_deficient_regression_warns():
     n = 500
     data = TimeData.from_rate(1.0, {"u": np.zeros(n), "y": np.random.default_rng(0).standard_normal(n)})
@@ -413,10 +428,10 @@ def test_order_selection_for_output_error_models():
 def test_missing_channels_and_bad_roles():
     data = _arx_data(n=100)
     with pytest.raises(
-        DataError, match=r"input channel 'F9' is not in the data; available channels: \['u1', 'u2', 'y'\]"
+        DataError, match=r"input channel\(s\) \['F9'\] not found in the data; available channels: \['u1', 'u2', 'y'\]"
     ):
         ARX(1, 1).fit(data, inputs=["F9"], output="y")
-    with pytest.raises(DataError, match=r"output channel 'd1' is not in the data; available channels"):
+    with pytest.raises(DataError, match=r"output channel\(s\) \['d1'\] not found in the data; available channels"):
         ARX(1, 1).fit(data, inputs="u1", output="d1")
     with pytest.raises(DataError, match=r"output channel 'y' is also listed as an input"):
         ARX(1, 1).fit(data, inputs=["u1", "y"], output="y")
@@ -481,7 +496,7 @@ def test_use_before_fit_and_bad_use_after_fit():
     # the simulation needs no output channel; the one-step prediction does
     inputs_only = TimeData.from_rate(10.0, {"u1": np.ones(50), "u2": np.ones(50)})
     assert model.predict(inputs_only, horizon=math.inf).shape == (50,)
-    with pytest.raises(DataError, match=r"output channel 'y' is not in the data"):
+    with pytest.raises(DataError, match=r"output channel\(s\) \['y'\] not found in the data"):
         model.predict(inputs_only, horizon=1)
 
 

@@ -24,8 +24,10 @@ import numpy as np
 import scipy.signal as sig
 from numpy.typing import ArrayLike, NDArray
 
+from cappe._arguments import positive_number, real_number
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
-from cappe.identify._signals import SteppedSineSchedule
+from cappe.identify._signals import SteppedSineSchedule, _band, _integer
+from cappe.io.measurements import match_channels
 from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.frf import FRFData
 
@@ -245,37 +247,11 @@ def _names(value: Any, what: str) -> tuple[str, ...]:
     return tuple(names)
 
 
-def _rows(data: TimeData, names: tuple[str, ...], what: str) -> list[int]:
-    missing = [n for n in names if n not in data.channels]
-    if missing:
-        msg = f"{what} channel(s) {missing} not in the data; available channels: {list(data.channels)}"
-        raise DataError(msg)
-    return [data.channels.index(n) for n in names]
-
-
 def _check_data(data: Any) -> TimeData:
     if not isinstance(data, TimeData):
         msg = f"data must be a cappe.io.TimeData; got {type(data).__name__}"
         raise DataError(msg)
     return data
-
-
-def _int_arg(name: str, value: Any, low: int) -> int:
-    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
-        msg = f"argument {name!r} must be an integer >= {low}; got {value!r}"
-        raise DataError(msg)
-    return int(value)
-
-
-def _time_arg(name: str, value: Any, *, allow_zero: bool = False) -> float:
-    ok = isinstance(value, (int, float, np.floating, np.integer)) and not isinstance(value, bool)
-    if ok:
-        ok = math.isfinite(float(value)) and (float(value) >= 0 if allow_zero else float(value) > 0)
-    if not ok:
-        rule = ">= 0" if allow_zero else "> 0"
-        msg = f"argument {name!r} must be a finite time {rule} s; got {value!r}"
-        raise DataError(msg)
-    return float(value)
 
 
 def _fraction_arg(name: str, value: Any, *, open_low: bool = True, open_high: bool = True) -> float:
@@ -290,18 +266,6 @@ def _fraction_arg(name: str, value: Any, *, open_low: bool = True, open_high: bo
         msg = f"argument {name!r} must be in {interval}; got {value!r}"
         raise DataError(msg)
     return out
-
-
-def _band_arg(band: Any, nyquist: float) -> tuple[float, float]:
-    try:
-        lo, hi = (float(v) for v in band)
-    except (TypeError, ValueError):
-        msg = f"argument 'band' must be a pair (f_lo, f_hi) in Hz; got {band!r}"
-        raise DataError(msg) from None
-    if not (math.isfinite(lo) and math.isfinite(hi) and 0 <= lo < hi <= nyquist):
-        msg = f"band ({lo:g}, {hi:g}) Hz must satisfy 0 <= f_lo < f_hi <= Nyquist frequency {nyquist:g} Hz (fs / 2)"
-        raise DataError(msg)
-    return lo, hi
 
 
 def _window_arg(window: Any, nperseg: int) -> Array:
@@ -422,7 +386,7 @@ def detect_hits(data: TimeData, *, channel: str, threshold: float = 0.1, min_spa
     spacing = (
         max(1, int(round(0.1 * data.n_samples)))
         if min_spacing is None
-        else max(1, int(round(_time_arg("min_spacing", min_spacing) * data.fs)))
+        else max(1, int(round(positive_number("min_spacing", min_spacing, "s") * data.fs)))
     )
     peak = float(x.max())
     if peak == 0.0:
@@ -780,8 +744,8 @@ def estimate_frf(
     if both:
         msg = f"channel(s) {both} are listed as both inputs and outputs"
         raise DataError(msg)
-    in_rows = _rows(data, ins, "input")
-    out_rows = _rows(data, outs, "output")
+    in_rows = match_channels(data, ins, "input")
+    out_rows = match_channels(data, outs, "output")
     check_clipping(data.select([*ins, *outs]))
     kinds = {"h1": "H1", "h2": "H2", "hv": "Hv"}
     if not isinstance(estimator, str) or estimator.lower() not in kinds:
@@ -804,20 +768,19 @@ def estimate_frf(
         msg = f"argument 'exponential_window' must be a time constant in s, 'auto' or None; got {exponential_window!r}"
         raise DataError(msg)
     if exponential_window is not None and exponential_window != "auto":
-        _time_arg("exponential_window", exponential_window)
+        positive_number("exponential_window", exponential_window, "s")
     threshold = _fraction_arg("coherence_threshold", coherence_threshold)
     fraction = _fraction_arg("coherence_fraction", coherence_fraction, open_low=False, open_high=False)
     hit_level = _fraction_arg("hit_threshold", hit_threshold)
     fs = data.fs
-    nyquist = fs / 2
-    lo_hi = None if band is None else _band_arg(band, nyquist)
+    lo_hi = None if band is None else _band(band, fs)
     if nperseg is not None:
-        nperseg = _int_arg("nperseg", nperseg, 2)
+        nperseg = _integer("nperseg", nperseg, 2)
         if nperseg > data.n_samples:
             msg = f"argument 'nperseg' = {nperseg} exceeds the {data.n_samples} samples of the data"
             raise DataError(msg)
     if n_averages is not None:
-        n_averages = _int_arg("n_averages", n_averages, 1)
+        n_averages = _integer("n_averages", n_averages, 1)
     is_impact = (
         bool(impact) or force_window is not None or not (exponential_window is None or exponential_window == "auto")
     )
@@ -833,7 +796,10 @@ def estimate_frf(
             msg = f"argument 'window' must be 'boxcar' (rectangular) in impact mode; got {window!r}"
             raise DataError(msg)
         if pretrigger is not None:
-            _time_arg("pretrigger", pretrigger, allow_zero=True)
+            pretrigger = real_number("pretrigger", pretrigger)
+            if pretrigger < 0:
+                msg = f"argument 'pretrigger' must be >= 0 s; got {pretrigger!r}"
+                raise DataError(msg)
         x, y, length, tau = _impact_blocks(
             data,
             in_rows[0],
@@ -999,7 +965,7 @@ def stepped_sine_frf(
     if len(ins) != 1:
         msg = f"a stepped-sine FRF takes exactly one input channel; got {list(ins)}"
         raise DataError(msg)
-    rows = _rows(data, ins, "input") + _rows(data, outs, "output")
+    rows = match_channels(data, ins, "input") + match_channels(data, outs, "output")
     if abs(data.fs - schedule.fs) > 1e-9 * schedule.fs:
         msg = f"the data is sampled at {data.fs:g} Hz but the schedule at {schedule.fs:g} Hz"
         raise DataError(msg)
@@ -1074,7 +1040,7 @@ def exponential_window_correction(
     >>> round(float(out.zeta[0]), 5)
     0.00409
     """
-    t = _time_arg("tau", tau)
+    t = positive_number("tau", tau, "s")
     if poles is not None:
         if freq is not None or zeta is not None:
             msg = "give either 'poles' or 'freq' and 'zeta', not both"

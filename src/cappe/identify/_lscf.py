@@ -37,6 +37,7 @@ import scipy.cluster.hierarchy as sch
 import scipy.linalg as sla
 from numpy.typing import ArrayLike, NDArray
 
+from cappe.correlate import mac
 from cappe.exceptions import DataError
 from cappe.systems.frf import FRFData
 
@@ -638,10 +639,7 @@ def _cluster_distance(diagram: StabilizationDiagram, idx: NDArray[np.intp]) -> F
     p = diagram.poles[idx]
     v = diagram.participation[:, idx]
     rel = np.abs(p[:, None] - p[None, :]) / np.maximum(np.abs(p)[:, None], np.abs(p)[None, :])
-    cross = np.abs(v.conj().T @ v) ** 2
-    nrm = np.sum(np.abs(v) ** 2, axis=0)
-    mac = cross / np.outer(nrm, nrm)
-    d = rel + (1.0 - mac)
+    d = rel + (1.0 - mac(v, v))
     np.fill_diagonal(d, 0.0)
     return np.asarray(np.maximum(0.5 * (d + d.T), 0.0), dtype=float)
 

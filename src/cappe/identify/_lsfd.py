@@ -43,14 +43,14 @@ ComplexArray = NDArray[np.complex128]
 _DERIVATIVE = {"displacement": 0, "elongation": 0, "velocity": 1, "acceleration": 2}
 
 
-def _derivative_orders(frf: FRFData) -> NDArray[np.intp]:
-    n_out = len(frf.output_names)
-    if not frf.output_quantities:
+def _derivative_orders(quantities: Sequence[str], n_out: int) -> NDArray[np.intp]:
+    """Time-derivative order of each of ``n_out`` outputs (all 0 when no quantities are given)."""
+    if not quantities:
         return np.zeros(n_out, dtype=np.intp)
-    if len(frf.output_quantities) != n_out:
-        msg = f"FRF output_quantities must name one quantity per output ({n_out}); got {len(frf.output_quantities)}"
+    if len(quantities) != n_out:
+        msg = f"FRF output_quantities must name one quantity per output ({n_out}); got {len(quantities)}"
         raise DataError(msg)
-    return np.array([_DERIVATIVE.get(q, 0) for q in frf.output_quantities], dtype=np.intp)
+    return np.array([_DERIVATIVE.get(q, 0) for q in quantities], dtype=np.intp)
 
 
 def _basis(s: ComplexArray, poles: ComplexArray, lower: bool, upper: bool) -> ComplexArray:
@@ -148,7 +148,7 @@ class ModalFit:
         b = 1.0 / (s[None, :] - poles.conj()[:, None])
         H = np.einsum("oir,rf->oif", self.residues, a) + np.einsum("oir,rf->oif", self.residues.conj(), b)
         H = H + self.lower_residual[..., None] / s**2 + self.upper_residual[..., None]
-        d = np.array([_DERIVATIVE.get(q, 0) for q in self.output_quantities] or [0] * len(self.output_names))
+        d = _derivative_orders(self.output_quantities, len(self.output_names))
         H = H * s[None, None, :] ** d[:, None, None]
         return FRFData(f, H, self.input_names, self.output_names, self.output_quantities)
 
@@ -313,7 +313,7 @@ def lsfd(
     idx = idx[freq[idx] > 0]
     lam = _as_poles(poles)
     driving = _driving_pairs(frf, driving_points)
-    deriv = _derivative_orders(frf)
+    deriv = _derivative_orders(frf.output_quantities, len(frf.output_names))
     Hb = H[:, :, idx]
     _check_finite(Hb, freq[idx], frf)
     n_out, n_in, n_f = Hb.shape

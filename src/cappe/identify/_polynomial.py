@@ -32,6 +32,7 @@ import scipy.signal as sig
 from numpy.typing import NDArray
 
 from cappe.exceptions import ConvergenceWarning, DataError, IllConditionedWarning, ModelError, NotFittedError
+from cappe.io.measurements import match_channels
 from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.statespace import StateSpaceModel
 from cappe.systems.transfer import TransferFunctionModel, transfer_function
@@ -425,6 +426,9 @@ def _pem(theta0: Array, o: _Orders, y: Array, u: Array, *, max_iter: int, tol: f
         scale = np.sqrt(np.einsum("ij,ij->j", jac, jac))
         scale[scale == 0] = 1.0
         uu, s, vt = np.linalg.svd(jac / scale, full_matrices=False)
+        if not s[0] > 0:  # e.g. an input that is zero throughout: the errors do not depend on the parameters
+            message = "the prediction errors do not depend on the parameters (zero Jacobian)"
+            break
         g = uu.T @ e
         gradient = float(np.linalg.norm(s * g)) / max(float(s[0]) * math.sqrt(cost), 1e-300)
         accepted = False
@@ -593,10 +597,7 @@ def _input_names(inputs: Sequence[str] | str) -> tuple[str, ...]:
 
 
 def _channel(data: TimeData, name: str, role: str) -> Array:
-    if name not in data.channels:
-        msg = f"{role} channel {name!r} is not in the data; available channels: {list(data.channels)}"
-        raise DataError(msg)
-    return data.channel(name)
+    return np.asarray(data.values[match_channels(data, [name], role)[0]])
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -618,7 +619,6 @@ class PolynomialModel(ABC):
     (True, {'na': 2, 'nb': 2, 'nk': 1})
     """
 
-    _name: ClassVar[str] = "PolynomialModel"
     _iterative: ClassVar[bool] = True
 
     max_iter: int
@@ -673,7 +673,7 @@ class PolynomialModel(ABC):
         if output in names:
             msg = f"output channel {output!r} is also listed as an input"
             raise DataError(msg)
-        u = np.array([_channel(data, n, "input") for n in names])
+        u = data.values[match_channels(data, names, "input")]
         y = _channel(data, output, "output")
         check_clipping(data.select([*names, output]))
         o = self._orders(len(names))
@@ -695,11 +695,15 @@ class PolynomialModel(ABC):
     def _fit_arrays(self, y: Array, u: Array, o: _Orders) -> None:
         p0 = self._start(y, u, o)
         result = _pem(_pack(p0, o), o, y, u, max_iter=self.max_iter, tol=self.tol)
-        e = result.errors
-        self._set_result(_unpack(result.theta, o), o, e, result.jacobian)
-        self.success_ = result.success
-        self.message_ = result.message
-        self.n_iter_ = result.n_iter
+        self._set_result(
+            _unpack(result.theta, o),
+            o,
+            result.errors,
+            _unscaled_covariance(result.jacobian, self),
+            success=result.success,
+            message=result.message,
+            n_iter=result.n_iter,
+        )
         if not result.success:
             warnings.warn(
                 f"{self!r} did not converge: {result.message} (loss {self.loss_:.3g}); the estimate may be poor",
@@ -707,7 +711,10 @@ class PolynomialModel(ABC):
                 stacklevel=3,
             )
 
-    def _set_result(self, p: _Polys, o: _Orders, e: Array, jac: Array) -> None:
+    def _set_result(
+        self, p: _Polys, o: _Orders, e: Array, cov_unscaled: Array, *, success: bool, message: str, n_iter: int
+    ) -> None:
+        """Learned attributes from the polynomials, the residuals ``e`` and ``(J^T J)^-1``."""
         n_eff = e.size
         d = o.n_parameters
         sse = float(e @ e)
@@ -718,8 +725,11 @@ class PolynomialModel(ABC):
         self.n_samples_ = n_eff
         self.loss_ = sse / n_eff
         self.noise_variance_ = sse / (n_eff - d)
-        self.covariance_ = self.noise_variance_ * _unscaled_covariance(jac, self)
+        self.covariance_ = self.noise_variance_ * cov_unscaled
         self.parameter_std_ = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
+        self.success_ = success
+        self.message_ = message
+        self.n_iter_ = n_iter
 
     # -- use ------------------------------------------------------------------------------------------------------
     def _check_fitted(self) -> None:
@@ -735,7 +745,7 @@ class PolynomialModel(ABC):
         if abs(data.dt - self.dt_) > 1e-6 * self.dt_:
             msg = f"data sampled at dt = {data.dt:.9g} s but the model was fitted at dt = {self.dt_:.9g} s"
             raise DataError(msg)
-        return np.array([_channel(data, n, "input") for n in self.inputs_])
+        return np.asarray(data.values[match_channels(data, self.inputs_, "input")])
 
     def predict(self, data: TimeData, horizon: float = 1) -> Array:
         """Predicted output, shape (n_samples,).
@@ -974,9 +984,9 @@ def _unscaled_covariance(jac: Array, model: PolynomialModel) -> Array:
             IllConditionedWarning,
             stacklevel=4,
         )
-    with np.errstate(divide="ignore"):
+    with np.errstate(divide="ignore", invalid="ignore"):  # inf * 0 and inf - inf: an unidentifiable direction
         inv_s2 = np.where(s > tol, 1.0 / s**2, np.inf)
-    cov = (vt.T * inv_s2) @ vt
+        cov = (vt.T * inv_s2) @ vt
     cov = np.where(np.isnan(cov), np.inf, cov)
     return np.asarray(cov / np.outer(scale, scale), dtype=float)
 
@@ -1010,7 +1020,6 @@ class ARX(PolynomialModel):
     (array([ 1. , -0.8]), array([0. , 0.5]))
     """
 
-    _name = "ARX"
     _iterative = False
 
     def __init__(self, na: int, nb: int | Sequence[int], nk: int | Sequence[int] = 1) -> None:
@@ -1036,21 +1045,7 @@ class ARX(PolynomialModel):
                 IllConditionedWarning,
                 stacklevel=3,
             )
-        e = sol.residuals
-        sse = float(e @ e)
-        n_eff, d = e.size, o.n_parameters
-        self._o = o
-        self.A_, self.B_, self.C_, self.D_, self.F_ = p.A, list(p.B), p.C, p.D, list(p.F)
-        self.parameters_ = _pack(p, o)
-        self.n_parameters_ = d
-        self.n_samples_ = n_eff
-        self.loss_ = sse / n_eff
-        self.noise_variance_ = sse / (n_eff - d)
-        self.covariance_ = self.noise_variance_ * sol.cov_unscaled
-        self.parameter_std_ = np.sqrt(np.clip(np.diag(self.covariance_), 0.0, None))
-        self.success_ = True
-        self.message_ = "least squares"
-        self.n_iter_ = 0
+        self._set_result(p, o, sol.residuals, sol.cov_unscaled, success=True, message="least squares", n_iter=0)
 
 
 class ARMAX(PolynomialModel):
@@ -1084,8 +1079,6 @@ class ARMAX(PolynomialModel):
     >>> bool(abs(model.C_[1] - 0.5) < 0.1), model.success_
     (True, True)
     """
-
-    _name = "ARMAX"
 
     def __init__(
         self,
@@ -1151,8 +1144,6 @@ class OE(PolynomialModel):
     array([ 1. , -1.2,  0.5])
     """
 
-    _name = "OE"
-
     def __init__(
         self,
         nb: int | Sequence[int],
@@ -1209,8 +1200,6 @@ class BoxJenkins(PolynomialModel):
     >>> bool(abs(model.F_[0][1] + 0.5) < 0.02 and abs(model.D_[1] + 0.9) < 0.03)
     True
     """
-
-    _name = "BoxJenkins"
 
     def __init__(
         self,

@@ -305,21 +305,17 @@ def fit_rational(
     x = 2 * np.pi * freq / scale
     degree = max(n_num, n_den)
 
-    v = np.ones(n_f)
-    v_prev = v / np.linalg.norm(v)
+    v = np.full(n_f, 1.0 / np.sqrt(n_f))  # weights 1 / |D| of the last iterate, unit norm; Levy: uniform
     converged = method == "levy"
-    n_iter = 0
     max_solves = 1 if method == "levy" else iterations
-    basis = _basis(x, v, degree)
-    coef = np.zeros(n_den + 1)
     for n_iter in range(1, max_solves + 1):  # noqa: B007
         basis = _basis(x, v, degree)
         coef = _denominator(basis, hc, wc * v[None, :], n_num, n_den)
         d_val = basis.values[:, : n_den + 1] @ coef
         v_new = 1.0 / np.maximum(np.abs(d_val), 1e-300)
         v_new /= np.linalg.norm(v_new)
-        change = float(np.linalg.norm(v_new - v_prev))
-        v, v_prev = v_new, v_new
+        change = float(np.linalg.norm(v_new - v))
+        v = v_new
         if method == "sk" and change < tol:
             converged = True
             break

@@ -50,6 +50,14 @@ def _below_nyquist(name: str, value: Any, fs: float, *, allow_zero: bool = False
     return out
 
 
+def _integer(name: str, value: Any, low: int) -> int:
+    """An int (not a bool) >= ``low``."""
+    if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
+        msg = f"argument {name!r} must be an integer >= {low}; got {value!r}"
+        raise DataError(msg)
+    return int(value)
+
+
 def _n_samples(fs: float, duration: Any) -> int:
     dur = positive_number("duration", duration, "s")
     n = int(round(dur * fs))
@@ -378,16 +386,14 @@ def random_noise(
     fs = positive_number("fs", fs, "Hz")
     n = _n_samples(fs, duration)
     level = positive_number("rms", rms, unit)
-    if not isinstance(n_periods, (int, np.integer)) or isinstance(n_periods, bool) or n_periods < 1:
-        msg = f"argument 'n_periods' must be an integer >= 1; got {n_periods!r}"
-        raise DataError(msg)
+    n_periods = _integer("n_periods", n_periods, 1)
     if n_periods > 1 and not periodic:
         msg = f"argument 'n_periods' = {n_periods} needs periodic=True"
         raise DataError(msg)
     if n % n_periods:
         msg = f"argument 'duration' ({n} samples) must split into n_periods = {n_periods} periods of whole samples"
         raise DataError(msg)
-    n_period = n // int(n_periods)
+    n_period = n // n_periods
     gen = as_generator(rng)
     freq = np.fft.rfftfreq(n_period, 1.0 / fs)
     f_lo, f_hi = _band(band, fs)
@@ -407,7 +413,7 @@ def random_noise(
         spectrum[-1] = spectrum[-1].real  # the Nyquist line of a real signal is real
     x = np.asarray(np.fft.irfft(spectrum, n=n_period), dtype=float)
     x *= level / np.sqrt(np.mean(x**2))
-    return _signal(np.tile(x, int(n_periods)), fs, name, unit)
+    return _signal(np.tile(x, n_periods), fs, name, unit)
 
 
 def _band(band: tuple[float, float] | None, fs: float) -> tuple[float, float]:
@@ -466,36 +472,31 @@ def prbs(
     """
     fs = positive_number("fs", fs, "Hz")
     amp = real_number("amplitude", amplitude)
-    if not isinstance(clock_divider, (int, np.integer)) or isinstance(clock_divider, bool) or clock_divider < 1:
-        msg = f"argument 'clock_divider' must be an integer >= 1; got {clock_divider!r}"
-        raise DataError(msg)
-    if n_samples is not None and (
-        not isinstance(n_samples, (int, np.integer)) or isinstance(n_samples, bool) or n_samples < 2
-    ):
-        msg = f"argument 'n_samples' must be an integer >= 2; got {n_samples!r}"
-        raise DataError(msg)
+    divider = _integer("clock_divider", clock_divider, 1)
+    if n_samples is not None:
+        n_samples = _integer("n_samples", n_samples, 2)
     if order is None:
         if n_samples is None:
             msg = "prbs needs 'order' or 'n_samples'"
             raise DataError(msg)
-        bits_needed = -(-int(n_samples) // int(clock_divider))
+        bits_needed = -(-n_samples // divider)
         order = max(2, int(math.ceil(math.log2(bits_needed + 1))))
     if not isinstance(order, (int, np.integer)) or isinstance(order, bool) or not 2 <= order <= 32:
         msg = f"argument 'order' must be an integer in [2, 32]; got {order!r}"
         raise DataError(msg)
     period_bits = 2 ** int(order) - 1
-    n = period_bits * int(clock_divider) if n_samples is None else int(n_samples)
+    n = period_bits * divider if n_samples is None else n_samples
     state = None
     if rng is not None:
         gen = as_generator(rng)
         state = gen.integers(0, 2, size=int(order))
         if not state.any():
             state[gen.integers(int(order))] = 1  # the all-zero register is the one forbidden state
-    bits_needed = -(-n // int(clock_divider))
+    bits_needed = -(-n // divider)
     seq, _ = sig.max_len_seq(int(order), state=state, length=min(bits_needed, period_bits))
     if bits_needed > period_bits:
         seq = np.resize(seq, bits_needed)
-    levels = np.repeat(2.0 * seq.astype(float) - 1.0, int(clock_divider))[:n]
+    levels = np.repeat(2.0 * seq.astype(float) - 1.0, divider)[:n]
     return _signal(amp * levels, fs, name, unit)
 
 
