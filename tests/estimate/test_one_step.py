@@ -220,7 +220,7 @@ def test_one_step_errors_name_what_is_wrong(two_mass, clean):
         OneStepEstimator(two_mass, ["k11"]).fit(flat)
     with pytest.raises(DataError, match=r"continuation must list artificial damping ratios > 0; got \[0.3, -1.0\]"):
         OneStepEstimator(two_mass, ["k11"], continuation=(0.3, -1.0)).fit(clean)
-    with pytest.raises(DataError, match=r"max_delay must be a finite number > 0; got -2"):
+    with pytest.raises(DataError, match=r"argument 'max_delay' must be > 0 s; got -2"):
         OneStepEstimator(two_mass, ["k11"], max_delay=-2).fit(clean)
     slow = TimeData.from_rate(FS / 2, {c: clean.values[i] for i, c in enumerate(clean.channels)})
     with pytest.raises(DataError, match=r"time data record 1 has sample time 0.002 s; every record must share 0.001"):

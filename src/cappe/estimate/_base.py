@@ -224,12 +224,8 @@ def fit_least_squares(
         if best is None or sol.cost < best.cost:
             best = sol
     if best is None:
-        nan = np.full(space.n, np.nan)
-        return ParameterEstimate(
-            method, space.names, nan, nan, np.column_stack([nan, nan]), np.full((space.n, space.n), np.nan),
-            np.zeros(space.n, dtype=bool), (), float("nan"), False, "every start failed: " + str(runs[-1]["message"]),
-            {"runs": runs, **(diagnostics or {})},
-        )
+        return ParameterEstimate.failed(method, space.names, "every start failed: " + str(runs[-1]["message"]),
+                                        {"runs": runs, **(diagnostics or {})})
     p = space.from_internal(best.x)
     _LAST_FIT.set((space, residuals, p))
     jac_p = best.jac / space.value_jacobian(best.x)  # back to d r / d p in SI

@@ -43,13 +43,12 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
 import scipy.linalg as sla
 from numpy.typing import NDArray
-from scipy import signal, stats
+from scipy import signal
 from scipy.integrate import cumulative_simpson
 from scipy.optimize import least_squares
 
@@ -57,7 +56,7 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
+from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError
 from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
@@ -227,7 +226,7 @@ class DirectEstimator(Estimator):
                 theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
                 history.append(space.mapping(theta))
         residuals = ((b - a @ theta) * weights[:, None]).ravel()
-        unc = _uncertainty(space.names, theta, jac, residuals)
+        unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
         diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
         diagnostics["iterations"] = len(history)
         if len(history) > 1:
@@ -258,8 +257,7 @@ class DirectEstimator(Estimator):
         """Gauss-Newton (bounded trust-region) on the weighted equation errors, in the space's internal coordinates.
 
         The first pass weights each DOF by the RMS of its equation error at the start, the second by that at the
-        first estimate. (Not :func:`fit_least_squares`: the equation errors number n_dof x n_samples, and the
-        uncertainty is taken through the Jacobian's QR factor.)
+        first estimate, continuing from it.
         """
         lo, hi = space.internal_bounds()
         first = 1.0 / eq.scale_from_residual(eq.residuals(space.start))
@@ -281,7 +279,7 @@ class DirectEstimator(Estimator):
             )
         theta = space.from_internal(sol.x)
         jac_p = _flat_jac(eq.jacobian, weights)(theta)
-        unc = _uncertainty(space.names, theta, jac_p, sol.fun)
+        unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac_p, residuals=sol.fun)
         at_bound = [n for n, a, b, x in zip(space.names, lo, hi, sol.x, strict=True) if np.isclose(x, a) or
                     np.isclose(x, b)]
         message = f"Gauss-Newton on the equation errors: {sol.message}"
@@ -589,24 +587,6 @@ def _residual_weights(a: Array, b: Array, theta: Array, weights: Array) -> Array
     sigma = np.sqrt(np.mean(r**2, axis=1))
     floor = 1e-12 / weights
     return np.asarray(1.0 / np.maximum(sigma, floor), dtype=float)
-
-
-def _uncertainty(names: Sequence[str], values: Array, jac: Array, residuals: Array) -> LocalUncertainty:
-    """:func:`jacobian_uncertainty` of a tall regression through its QR factor ``R`` (same ``J^T J``).
-
-    ``jacobian_uncertainty`` takes a full SVD of the Jacobian, whose left factor would be (n_obs, n_obs); the
-    triangular factor carries the same information. The noise variance and the Student-t quantile use the
-    regression's own degrees of freedom ``n_obs - n``.
-    """
-    n_obs, n_p = jac.shape
-    dof = max(n_obs - n_p, 1)
-    s2 = float(residuals @ residuals) / dof
-    r_factor = sla.qr(jac, mode="r")[0][:n_p] if n_obs > n_p else jac
-    unc = jacobian_uncertainty(names=names, values=values, jacobian=r_factor, residuals=np.zeros(r_factor.shape[0]),
-                               noise_variance=s2)
-    t = float(stats.t.ppf(0.975, dof))
-    ci95 = np.column_stack([unc.values - t * unc.std, unc.values + t * unc.std])
-    return replace(unc, ci95=ci95, dof=dof)
 
 
 def _iv_solve(a: Array, b: Array, inst: Array, weights: Array, p0: Array) -> tuple[Array, Array]:

@@ -268,7 +268,7 @@ class FeatureMapEstimator(Estimator):
             points = np.column_stack([g.ravel() for g in mesh])
         else:
             count = self.samples or _SOBOL_PER_UNKNOWN * n
-            unit = qmc.Sobol(d=n, scramble=True, seed=rng).random_base2(int(np.ceil(np.log2(count))))
+            unit = qmc.Sobol(d=n, scramble=True, rng=rng).random_base2(int(np.ceil(np.log2(count))))
             points = lo + unit * (hi - lo)
         features = evaluate(points)
         surrogate = _surrogate(kind, points, features, grid_axes, lo, hi)

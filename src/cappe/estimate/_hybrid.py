@@ -8,6 +8,7 @@ chained; each stage may take its own data.
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -87,7 +88,7 @@ class HybridEstimator(Estimator):
             if k < len(stages) - 1:
                 if not np.all(np.isfinite(result.values)):
                     msg = f"hybrid stage {stage!r} returned no usable estimate ({result.message})"
-                    return _failed(space, msg, history)
+                    return ParameterEstimate.failed(self.method, space.names, msg, {"stages": history})
                 start = space.mapping(np.clip(result.values, space.lower, space.upper))
         assert result is not None  # stages is non-empty
         last_cost = getattr(estimator, "_cost", None)
@@ -95,15 +96,4 @@ class HybridEstimator(Estimator):
             _LAST_FIT.set(last_cost)  # the hybrid's cost is its last stage's
         diag = dict(result.diagnostics)
         diag["stages"] = history
-        return ParameterEstimate(
-            self.method, result.names, result.values, result.std, result.ci95, result.correlation,
-            result.identifiable, result.combinations, result.cost, result.success, result.message, diag,
-        )
-
-
-def _failed(space: ParameterSpace, message: str, history: list[dict[str, Any]]) -> ParameterEstimate:
-    nan = np.full(space.n, np.nan)
-    return ParameterEstimate(
-        "hybrid", space.names, nan, nan, np.column_stack([nan, nan]), np.full((space.n, space.n), np.nan),
-        np.zeros(space.n, dtype=bool), (), float("nan"), False, message, {"stages": history},
-    )
+        return replace(result, method=self.method, diagnostics=diag)

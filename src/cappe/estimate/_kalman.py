@@ -70,9 +70,10 @@ from scipy import stats
 
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator
+from cappe.estimate._one_step import _select as _select_channels
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import _combination
+from cappe.estimate._uncertainty import _NULL_WEIGHT, null_direction_text
 from cappe.exceptions import DataError
 from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
@@ -88,8 +89,6 @@ _RELINEARIZE = 0.01
 _MAX_ROWS = 2000
 #: A direction whose data information is below this multiple of the bounds prior's is undetermined.
 _INFO_RATIO = 1.0
-#: Weight of a parameter in an undetermined direction above which it is flagged.
-_NULL_WEIGHT = 0.1
 #: Variance (scaled states) of an initial state known to be at rest.
 _REST_VAR = 1e-12
 #: Samples used for the least-squares initial state.
@@ -110,49 +109,22 @@ class _Record:
     dt: float
 
 
-def _names(value: Sequence[str] | str | None, what: str) -> list[str] | None:
-    if value is None:
-        return None
-    names = [value] if isinstance(value, str) else list(value)
-    if not names:
-        msg = f"{what} must name at least one channel; got an empty list"
-        raise DataError(msg)
-    return names
-
-
 def _select(
     nm: NumericModel, data: Any, inputs: Sequence[str] | str | None, outputs: Sequence[str] | str | None
 ) -> _Record:
-    """Input and output channels of a TimeData, matched to the model's inputs and outputs by name."""
+    """Input and output channels of a TimeData, matched to the model's inputs and outputs by name (as for the
+    one-step method: by default every model input and output the data have)."""
     if not isinstance(data, TimeData):
         msg = f"Kalman-filter estimation needs TimeData (forces and responses); got {type(data).__name__}"
         raise DataError(msg)
-    model = nm.structure.name
-    chosen: dict[str, list[str]] = {}
-    for what, given, known in (("input", inputs, nm.input_names), ("output", outputs, nm.output_names)):
-        names = _names(given, f"{what}s")
-        if names is None:
-            names = [c for c in data.channels if c in known]
-            if not names:
-                msg = (
-                    f"data channels {list(data.channels)} include no {what} of model '{model}'; "
-                    f"its {what}s are {list(known)}"
-                )
-                raise DataError(msg)
-        for name in names:
-            if name not in known:
-                msg = f"{what} {name!r} is not an {what} of model '{model}'; its {what}s are {list(known)}"
-                raise DataError(msg)
-            if name not in data.channels:
-                msg = f"data have no channel {name!r} (model {what}); channels: {list(data.channels)}"
-                raise DataError(msg)
-        chosen[what] = names
-    w = np.ascontiguousarray(data.values[[data.index(c) for c in chosen["input"]]].T)
-    y = np.ascontiguousarray(data.values[[data.index(c) for c in chosen["output"]]].T)
+    chosen_in = _select_channels(inputs, nm.input_names, data.channels, "input", "time data")
+    chosen_out = _select_channels(outputs, nm.output_names, data.channels, "output", "time data")
     if data.n_samples < 10:
         msg = f"Kalman-filter estimation needs at least 10 samples; got {data.n_samples}"
         raise DataError(msg)
-    return _Record(tuple(chosen["input"]), tuple(chosen["output"]), w, y, float(data.dt))
+    w = np.ascontiguousarray(data.values[[data.index(c) for c in chosen_in]].T)
+    y = np.ascontiguousarray(data.values[[data.index(c) for c in chosen_out]].T)
+    return _Record(tuple(chosen_in), tuple(chosen_out), w, y, float(data.dt))
 
 
 def _rms(values: Array) -> Array:
@@ -843,7 +815,7 @@ def _identifiability(
     ratio, vec = np.linalg.eigh(_symmetric(info * np.outer(scale, scale)))
     null = vec[:, ratio < _INFO_RATIO].T
     weight = np.sqrt(np.sum(null**2, axis=0))
-    return weight <= _NULL_WEIGHT, ratio, tuple(_combination(names, v) for v in null)
+    return weight <= _NULL_WEIGHT, ratio, tuple(null_direction_text(names, v) for v in null)
 
 
 def _symmetric(mat: NDArray[np.floating[Any]]) -> Array:

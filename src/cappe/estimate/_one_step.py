@@ -56,6 +56,7 @@ import scipy.signal as sig
 from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import least_squares
 
+from cappe._arguments import positive_number
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, fit_least_squares
 from cappe.estimate._result import ParameterEstimate
@@ -195,18 +196,6 @@ def _select(requested: Sequence[str] | str | None, model_names: tuple[str, ...],
     return names
 
 
-def _positive_number(name: str, value: Any) -> float:
-    try:
-        number = float(value)
-    except (TypeError, ValueError) as exc:
-        msg = f"{name} must be a number > 0; got {value!r}"
-        raise DataError(msg) from exc
-    if not (np.isfinite(number) and number > 0):
-        msg = f"{name} must be a finite number > 0; got {value!r}"
-        raise DataError(msg)
-    return number
-
-
 def _orthonormal(basis: Array) -> Array:
     """Orthonormal columns spanning ``basis`` (rank-revealing: dependent columns are dropped)."""
     if basis.shape[1] == 0:
@@ -315,8 +304,7 @@ class _TimeModel:
             z[:, :, i] = sig.lfilter([0.0, 1.0], [1.0, -m], drive[:, :, i], axis=1)
         yh = np.einsum("sjm,om->sjo", z, modes.cm).real
         yh += np.einsum("sji,oi->sjo", held[: n_seg * length].reshape(n_seg, length, -1), modes.d) * wj[None, :, None]
-        free = (wmu[None, :] ** np.arange(length)[:, None])[:, None, :] * modes.cm[None, :, :]  # (L, n_out, m)
-        return np.asarray(yh), np.concatenate([free.real, -free.imag], axis=2)
+        return np.asarray(yh), _free_response(wmu, modes.cm, length)
 
 
 def _shift(x: NDArray[Any], n: int) -> NDArray[Any]:
@@ -331,6 +319,20 @@ def _shift(x: NDArray[Any], n: int) -> NDArray[Any]:
     else:
         out[:n] = x[-n:]
     return out
+
+
+def _free_response(mu: CArray, cm: CArray, length: int) -> Array:
+    """Outputs (length, n_out, 2 m) of the modes' free responses ``mu^k`` from unit initial states (real and
+    imaginary parts): the columns that project out an unknown initial state."""
+    free = (mu[None, :] ** np.arange(length)[:, None])[:, None, :] * cm[None, :, :]
+    return np.concatenate([free.real, -free.imag], axis=2)
+
+
+def _offset_basis(weights: Array, n_out: int) -> Array:
+    """Per-output constants (length, n_out, n_out), each sample weighted by ``weights`` (length,)."""
+    basis = np.zeros((weights.size, n_out, n_out))
+    basis[:, np.arange(n_out), np.arange(n_out)] = weights[:, None]
+    return basis
 
 
 class OneStepEstimator(Estimator):
@@ -457,7 +459,7 @@ class OneStepEstimator(Estimator):
         n_samples = sum(r.u.shape[0] for r in records)
         max_delay = 0.0  # in samples
         if self.delay:
-            max_delay = 5.0 if self.max_delay is None else _positive_number("max_delay", self.max_delay) / dt
+            max_delay = 5.0 if self.max_delay is None else positive_number("max_delay", self.max_delay, "s") / dt
         n_extra = 1 if self.delay else 0
         if n_samples * len(outputs) <= 2 * (space.n + n_extra + len(outputs)):
             msg = (
@@ -474,11 +476,6 @@ class OneStepEstimator(Estimator):
 
         def split(theta: Array) -> tuple[Array, float]:
             return space.full(theta[: space.n]), float(theta[space.n] - shift) if self.delay else 0.0
-
-        def offset_basis(length: int, n_out: int, wj: Array) -> Array:
-            basis = np.zeros((length, n_out, n_out))
-            basis[:, np.arange(n_out), np.arange(n_out)] = wj[:, None]
-            return basis
 
         def exact_residuals(theta: Array) -> Array:
             params, delay = split(theta)
@@ -503,7 +500,7 @@ class OneStepEstimator(Estimator):
                     yd = rec.y[: n_seg * length].reshape(n_seg, length, -1) * wj[None, :, None]
                     cols = [free]
                     if self.offsets:
-                        cols.append(offset_basis(length, len(outputs), wj))
+                        cols.append(_offset_basis(wj, len(outputs)))
                     q = _orthonormal(np.concatenate(cols, axis=2).reshape(length * len(outputs), -1))
                     r = (yh - yd).reshape(n_seg, -1)
                     out.append((r - (r @ q) @ q.T).ravel())
@@ -560,13 +557,9 @@ class OneStepEstimator(Estimator):
         if not free:
             return np.asarray((r - r.mean(axis=0)).ravel())
         n, n_out = r.shape
-        mu = np.exp(modes.lam * sim.dt)
-        resp = (mu[None, :] ** np.arange(n)[:, None])[:, None, :] * modes.cm[None, :, :]
-        cols = [resp.real, -resp.imag]
+        cols = [_free_response(np.exp(modes.lam * sim.dt), modes.cm, n)]
         if self.offsets:
-            basis = np.zeros((n, n_out, n_out))
-            basis[:, np.arange(n_out), np.arange(n_out)] = 1.0
-            cols.append(basis)
+            cols.append(_offset_basis(np.ones(n), n_out))
         q = _orthonormal(np.concatenate(cols, axis=2).reshape(n * n_out, -1))
         flat = r.ravel()
         return np.asarray(flat - q @ (q.T @ flat))
@@ -591,11 +584,8 @@ class OneStepEstimator(Estimator):
             err = rec.y - sim.simulate(modes, rec.u, delay)
             n = err.shape[0]
             if self.initial_state:
-                mu = np.exp(modes.lam * sim.dt)
-                resp = (mu[None, :] ** np.arange(n)[:, None])[:, None, :] * modes.cm[None, :, :]
-                ones = np.zeros((n, err.shape[1], err.shape[1]))
-                ones[:, np.arange(err.shape[1]), np.arange(err.shape[1])] = 1.0
-                basis = np.concatenate([resp.real, -resp.imag, ones], axis=2).reshape(err.size, -1)
+                basis = np.concatenate([_free_response(np.exp(modes.lam * sim.dt), modes.cm, n),
+                                        _offset_basis(np.ones(n), err.shape[1])], axis=2).reshape(err.size, -1)
                 coef, *_ = np.linalg.lstsq(basis, err.ravel(), rcond=None)
                 level = coef[-err.shape[1]:]
             else:
@@ -881,7 +871,7 @@ class OneStepFRFEstimator(Estimator):
         out_idx = [model.output_names.index(n) for n in outputs]
         max_delay = 0.0
         if self.delay:
-            max_delay = (_positive_number("max_delay", self.max_delay) if self.max_delay is not None
+            max_delay = (positive_number("max_delay", self.max_delay, "s") if self.max_delay is not None
                          else 2.5 / float(freq.max()))
         full, shift = _delay_space(space, max_delay if self.delay else None)
         n_obs = 2 * int(mask.sum())

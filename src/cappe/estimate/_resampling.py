@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -114,18 +114,17 @@ def profile_likelihood(
     else:
         msg = f"{name!r} has no finite bounds and no local standard error: give bounds to profile it"
         raise DataError(msg)
-    grid = space.from_internal(np.broadcast_to(space.to_internal(estimate.values), (n_points, space.n)).copy())
-    grid[:, k] = space.from_internal(np.where(np.arange(space.n) == k, grid_u[:, None], 0.0))[:, k]
+    u_grid = np.tile(space.to_internal(estimate.values), (n_points, 1))
+    u_grid[:, k] = grid_u
+    grid = space.from_internal(u_grid)[:, k]
     costs = np.empty(n_points)
     others = [j for j in range(space.n) if j != k]
-    for i, value in enumerate(grid[:, k]):
+    for i, value in enumerate(grid):
         if not others:
             costs[i] = float(np.sum(np.asarray(residuals(np.array([value]))) ** 2))
             continue
         sub = space.fixing(name, value)
-        start = estimate.values[others]
-        sub = ParameterSpace(sub.names, sub.lower, sub.upper, np.clip(start, sub.lower, sub.upper), sub.log,
-                             sub.scale, sub.columns, sub.base)
+        sub = replace(sub, start=np.clip(estimate.values[others], sub.lower, sub.upper))
 
         def sub_residuals(p: Array, value: float = float(value)) -> Array:
             full = np.insert(p, k, value)
@@ -133,9 +132,9 @@ def profile_likelihood(
 
         costs[i] = fit_least_squares("profile", sub, sub_residuals).cost
     threshold = float(estimate.cost + _CHI2_95 * s2)
-    ci = (_crossing(grid[:, k], costs, threshold, k_side=-1, centre=estimate.values[k]),
-          _crossing(grid[:, k], costs, threshold, k_side=1, centre=estimate.values[k]))
-    return Profile(name, grid[:, k], costs, threshold, ci, not (np.isnan(ci[0]) and np.isnan(ci[1])))
+    ci = (_crossing(grid, costs, threshold, k_side=-1, centre=estimate.values[k]),
+          _crossing(grid, costs, threshold, k_side=1, centre=estimate.values[k]))
+    return Profile(name, grid, costs, threshold, ci, not (np.isnan(ci[0]) and np.isnan(ci[1])))
 
 
 def _crossing(x: Array, cost: Array, threshold: float, *, k_side: int, centre: float) -> float:

@@ -16,7 +16,7 @@ Unknown or non-identifiable values are ``null`` in the uncertainty, never a bare
 from __future__ import annotations
 
 import json
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -98,6 +98,16 @@ class ParameterEstimate:
             uncertainty.correlation, uncertainty.identifiable, uncertainty.combinations, float(cost), bool(success),
             message, diag,
         )
+
+    @classmethod
+    def failed(
+        cls, method: str, names: Sequence[str], message: str, diagnostics: Mapping[str, Any] | None = None
+    ) -> ParameterEstimate:
+        """A result without usable values: everything ``nan``, nothing identifiable, ``success`` False."""
+        n = len(names)
+        nan = np.full(n, np.nan)
+        return cls(method, tuple(names), nan, nan, np.column_stack([nan, nan]), np.full((n, n), np.nan),
+                   np.zeros(n, dtype=bool), (), float("nan"), False, message, dict(diagnostics or {}))
 
     @property
     def parameters(self) -> dict[str, float]:

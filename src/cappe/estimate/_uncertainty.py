@@ -130,13 +130,13 @@ def jacobian_uncertainty(
         corr = cov / np.outer(np.sqrt(np.diag(cov)), np.sqrt(np.diag(cov)))
     corr = np.where(np.outer(identifiable, identifiable), corr, np.nan)
     np.fill_diagonal(corr, 1.0)
-    combos = tuple(_combination(names, v) for v in null if np.any(v))
+    combos = tuple(null_direction_text(names, v) for v in null if np.any(v))
     return LocalUncertainty(
         tuple(names), p, cov, std, ci95, corr, identifiable, rank, condition, sv, combos, dof
     )
 
 
-def _combination(names: Sequence[str], direction: Array) -> str:
+def null_direction_text(names: Sequence[str], direction: Array) -> str:
     """A null direction (in relative coordinates) as ``"+0.71 m1 -0.71 m2"``, largest weights first."""
     v = direction / (np.max(np.abs(direction)) or 1.0)
     v = v * np.sign(v[np.argmax(np.abs(v))])
