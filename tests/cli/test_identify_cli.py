@@ -17,52 +17,11 @@ from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, load_model
 
-MODEL = """
-format: cappe.model/1
-name: mini-slide
-parameters:
-  - {name: mb, value: 300.0, unit: kg, kind: mass}
-  - {name: mt, value: 60.0, unit: kg, kind: mass}
-  - {name: me_kx, value: 6.0e7, unit: N/m, kind: stiffness, bounds: [4.2e7, 7.8e7], unknown: true}
-  - {name: me_ky, value: 1.2e8, unit: N/m, kind: stiffness, bounds: [0.84e8, 1.56e8], unknown: true}
-  - {name: me_kz, value: 5.0e7, unit: N/m, kind: stiffness, bounds: [3.5e7, 6.5e7], unknown: true}
-  - {name: lgs_k, value: 2.0e8, unit: N/m, kind: stiffness, bounds: [1.4e8, 2.6e8], unknown: true}
-  - {name: bsd_kz, value: 1.0e8, unit: N/m, kind: stiffness, bounds: [0.7e8, 1.3e8], unknown: true}
-  - {name: me_by, value: 6.0e3, unit: N s/m, kind: damping, bounds: [2.0e3, 1.8e4], unknown: true}
-  - {name: me_dx, value: 0.04, unit: '1', kind: loss, bounds: [0.0133333, 0.12], unknown: true}
-  - {name: lgs_bx, value: 2.0e3, unit: N s/m, kind: damping, bounds: [666.667, 6.0e3], unknown: true}
-  - {name: bsd_bz, value: 3.0e3, unit: N s/m, kind: damping}
-axes:
-  - {name: z, positions: [-0.2, 0.0, 0.25]}
-bodies:
-  - {name: bed, mass: mb, inertia: {xx: 30.0, yy: 45.0, zz: 25.0}}
-  - {name: table, mass: mt, inertia: {xx: 1.5, yy: 2.5, zz: 2.0}, position: [0, 0.3, z]}
-elements:
-  - {name: me1, bodies: [ground, bed], at: [-0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: me2, bodies: [ground, bed], at: [0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: me3, bodies: [ground, bed], at: [0.0, -0.3, 0.6], stiffness: {x: me_kx, y: me_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: shoe1, bodies: [bed, table], at: [-0.2, 0.2, z - 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
-     damping: {x: lgs_bx, y: lgs_bx}}
-  - {name: shoe2, bodies: [bed, table], at: [0.2, 0.2, z - 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
-     damping: {x: lgs_bx, y: lgs_bx}}
-  - {name: shoe3, bodies: [bed, table], at: [-0.2, 0.2, z + 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
-     damping: {x: lgs_bx, y: lgs_bx}}
-  - {name: shoe4, bodies: [bed, table], at: [0.2, 0.2, z + 0.15], stiffness: {x: lgs_k, y: 1.5*lgs_k},
-     damping: {x: lgs_bx, y: lgs_bx}}
-  - {name: bsd, bodies: [bed, table], at: [0.0, 0.2, z], stiffness: {z: bsd_kz}, damping: {z: bsd_bz}}
-sensors:
-  - {name: bed1, body: bed, point: [-0.6, 0.0, -0.5]}
-  - {name: bed2, body: bed, point: [0.6, 0.0, -0.5]}
-  - {name: bed3, body: bed, point: [0.0, 0.2, 0.6]}
-  - {name: tool, body: table, point: [0.0, 0.1, 0.0]}
-  - {name: table2, body: table, point: [0.2, 0.0, 0.1]}
-"""
+#: The small slide model shared with tests/estimate/test_automated.py (see tests/data/README.md).
+MODEL = Path(__file__).parents[1] / "data" / "bench-slide.yaml"
 
-TRUTH = {"me_kx": 7.1e7, "me_ky": 0.95e8, "me_kz": 4.1e7, "lgs_k": 2.3e8, "bsd_kz": 0.8e8,
-         "me_by": 1.1e4, "me_dx": 0.025, "lgs_bx": 1.2e3}
+TRUTH = {"me_kx": 7.1e7, "me1_ky": 0.95e8, "me2_ky": 1.2e8, "me3_ky": 1.7e8, "me_kz": 4.1e7, "lgs_kx": 2.3e8,
+         "lgs_ky": 3.4e8, "bsd_kz": 0.8e8, "me_by": 1.1e4, "me_dx": 0.025, "lgs_bx": 1.2e3, "lgs_dy": 0.03}
 
 
 def cli(argv: Sequence[str]) -> int:
@@ -80,9 +39,7 @@ def cli(argv: Sequence[str]) -> int:
 @pytest.fixture(scope="module")
 def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     folder = tmp_path_factory.mktemp("identify")
-    model = folder / "mini.yaml"
-    model.write_text(MODEL)
-    nm = NumericModel(load_model(model))
+    nm = NumericModel(load_model(MODEL))
     reference = ModalEngine(nm).modal_data([{"z": z} for z in (-0.2, 0.0, 0.25)], params=TRUTH)
     write_modal_data(folder / "ref.json", reference)
     (folder / "truth.json").write_text(json.dumps(TRUTH))
@@ -92,7 +49,7 @@ def files(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     many = ModalData(reference.sensors, (ModalDataSet(s.position, np.tile(s.frequency, 2), np.tile(s.damping, 2),
                                                       np.tile(s.shapes, (1, 2))),))
     write_modal_data(folder / "many.json", many)
-    return {"folder": folder, "model": model, "ref": folder / "ref.json", "truth": folder / "truth.json",
+    return {"folder": folder, "model": MODEL, "ref": folder / "ref.json", "truth": folder / "truth.json",
             "bad_sensor": folder / "bad_sensor.json", "many": folder / "many.json"}
 
 
@@ -143,13 +100,13 @@ def test_identify_json_without_hold_out(files, capsys):
 def test_identify_names_sensors_that_do_not_fit(files, capsys):
     code = cli(["identify", str(files["model"]), "--reference", str(files["bad_sensor"]), "--n-gsa", "8"])
     assert code == 1
-    assert "reference sensors ['nose:x'] are not sensor channels of model 'mini-slide'" in capsys.readouterr().err
+    assert "reference sensors ['nose:x'] are not sensor channels of model 'bench-slide'" in capsys.readouterr().err
 
 
 def test_identify_names_modes_and_positions_that_do_not_fit(files, capsys):
     code = cli(["identify", str(files["model"]), "--reference", str(files["many"]), "--n-gsa", "8"])
     assert code == 1
-    assert "reference set 0 (position {'z': -0.2}) has 24 modes; model 'mini-slide' has only 12" in capsys.readouterr().err
+    assert "reference set 0 (position {'z': -0.2}) has 24 modes; model 'bench-slide' has only 12" in capsys.readouterr().err
     code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--validation", "z=-0.294"])
     assert code == 1
     assert "position {'z': -0.294} is not among the reference's positions" in capsys.readouterr().err

@@ -1,14 +1,16 @@
 """Automated GSA-guided identification (paper 2022): pipeline, stages and validation on a small slide model.
 
-The test model: a bed on three mounting elements and a table on four guide shoes and a ball screw that moves
-along z (attachment points follow the axis), 12 DOF, 8 stiffness unknowns, 2 viscous and 2 hysteretic (loss factor)
-damping unknowns, bounds after paper eq. 14 (stiffness 0.7-1.3, damping 1/3-3 times nominal), 18 sensor channels.
+The test model (tests/data/bench-slide.yaml): a bed on three mounting elements and a table on four guide shoes and
+a ball screw that moves along z (attachment points follow the axis), 12 DOF, 8 stiffness unknowns, 2 viscous and 2
+hysteretic (loss factor) damping unknowns, bounds after paper eq. 14 (stiffness 0.7-1.3, damping 1/3-3 times
+nominal), 18 sensor channels.
 """
 
 from __future__ import annotations
 
 import json
 import warnings
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -29,61 +31,10 @@ from cappe.estimate._validation import model_receptance, summarize, validate_ide
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
-from cappe.model import NumericModel
-from cappe.model.loader import structure_from_yaml
+from cappe.model import NumericModel, load_model
 
-BENCH = """
-format: cappe.model/1
-name: bench-slide
-parameters:
-  - {name: mb, value: 400.0, unit: kg, kind: mass}
-  - {name: mt, value: 80.0, unit: kg, kind: mass}
-  - {name: me_kx, value: 6.0e7, unit: N/m, kind: stiffness, bounds: [4.2e7, 7.8e7], unknown: true}
-  - {name: me1_ky, value: 1.2e8, unit: N/m, kind: stiffness, bounds: [0.84e8, 1.56e8], unknown: true}
-  - {name: me2_ky, value: 1.0e8, unit: N/m, kind: stiffness, bounds: [0.7e8, 1.3e8], unknown: true}
-  - {name: me3_ky, value: 1.5e8, unit: N/m, kind: stiffness, bounds: [1.05e8, 1.95e8], unknown: true}
-  - {name: me_kz, value: 5.0e7, unit: N/m, kind: stiffness, bounds: [3.5e7, 6.5e7], unknown: true}
-  - {name: lgs_kx, value: 2.0e8, unit: N/m, kind: stiffness, bounds: [1.4e8, 2.6e8], unknown: true}
-  - {name: lgs_ky, value: 3.0e8, unit: N/m, kind: stiffness, bounds: [2.1e8, 3.9e8], unknown: true}
-  - {name: bsd_kz, value: 1.0e8, unit: N/m, kind: stiffness, bounds: [0.7e8, 1.3e8], unknown: true}
-  - {name: me_by, value: 6.0e3, unit: N s/m, kind: damping, bounds: [2.0e3, 1.8e4], unknown: true}
-  - {name: me_dx, value: 0.04, unit: '1', kind: loss, bounds: [0.0133333, 0.12], unknown: true}
-  - {name: lgs_bx, value: 2.0e3, unit: N s/m, kind: damping, bounds: [666.667, 6.0e3], unknown: true}
-  - {name: lgs_dy, value: 0.02, unit: '1', kind: loss, bounds: [0.00666667, 0.06], unknown: true}
-  - {name: bsd_bz, value: 3.0e3, unit: N s/m, kind: damping}
-axes:
-  - {name: z, positions: [-0.2, 0.0, 0.15, 0.3]}
-bodies:
-  - {name: bed, mass: mb, inertia: {xx: 40.0, yy: 60.0, zz: 30.0}}
-  - {name: table, mass: mt, inertia: {xx: 2.0, yy: 3.0, zz: 2.5}, position: [0, 0.3, z]}
-elements:
-  - {name: me1, bodies: [ground, bed], at: [-0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me1_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: me2, bodies: [ground, bed], at: [0.6, -0.3, -0.5], stiffness: {x: me_kx, y: me2_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: me3, bodies: [ground, bed], at: [0.0, -0.3, 0.6], stiffness: {x: me_kx, y: me3_ky, z: me_kz},
-     damping: {y: me_by}, loss: {x: me_dx, z: me_dx}}
-  - {name: shoe1, bodies: [bed, table], at: [-0.2, 0.2, z - 0.15], stiffness: {x: lgs_kx, y: lgs_ky},
-     damping: {x: lgs_bx}, loss: {y: lgs_dy}}
-  - {name: shoe2, bodies: [bed, table], at: [0.2, 0.2, z - 0.15], stiffness: {x: lgs_kx, y: lgs_ky},
-     damping: {x: lgs_bx}, loss: {y: lgs_dy}}
-  - {name: shoe3, bodies: [bed, table], at: [-0.2, 0.2, z + 0.15], stiffness: {x: lgs_kx, y: lgs_ky},
-     damping: {x: lgs_bx}, loss: {y: lgs_dy}}
-  - {name: shoe4, bodies: [bed, table], at: [0.2, 0.2, z + 0.15], stiffness: {x: lgs_kx, y: lgs_ky},
-     damping: {x: lgs_bx}, loss: {y: lgs_dy}}
-  - {name: bsd, bodies: [bed, table], at: [0.0, 0.2, z], stiffness: {z: bsd_kz}, damping: {z: bsd_bz}}
-sensors:
-  - {name: bed1, body: bed, point: [-0.6, 0.0, -0.5]}
-  - {name: bed2, body: bed, point: [0.6, 0.0, -0.5]}
-  - {name: bed3, body: bed, point: [0.0, 0.0, 0.6]}
-  - {name: bed4, body: bed, point: [0.6, 0.2, 0.6]}
-  - {name: tool, body: table, point: [0.0, 0.1, 0.0]}
-  - {name: table2, body: table, point: [0.2, 0.0, 0.1]}
-inputs:
-  - {name: F, body: table, point: [0, 0.1, 0], direction: x}
-outputs:
-  - {name: d, quantity: displacement, body: table, point: [0, 0.1, 0], direction: x}
-"""
+#: The small slide model shared with tests/cli/test_identify_cli.py (see tests/data/README.md).
+BENCH = Path(__file__).parents[1] / "data" / "bench-slide.yaml"
 
 POSITIONS = [{"z": -0.2}, {"z": 0.0}, {"z": 0.15}, {"z": 0.3}]
 STIFFNESS = ["me_kx", "me1_ky", "me2_ky", "me3_ky", "me_kz", "lgs_kx", "lgs_ky", "bsd_kz"]
@@ -92,7 +43,7 @@ DAMPING = ["me_by", "me_dx", "lgs_bx", "lgs_dy"]
 
 @pytest.fixture(scope="module")
 def bench() -> NumericModel:
-    return NumericModel(structure_from_yaml(BENCH))
+    return NumericModel(load_model(BENCH))
 
 
 def random_truth(model: NumericModel, seed: int) -> dict[str, float]:
@@ -343,6 +294,20 @@ def test_validation_overlay_choice(bench):
         validate_identification(model=bench, params={}, reference=reference, n_freq=50, inputs=["nose:x"])
 
 
+def test_validation_leaves_undamped_reference_modes_out_of_ndd(two_mass):
+    ref = ModalEngine(two_mass).modal_data()
+    s = ref.sets[0]
+    zeta = s.damping.copy()
+    zeta[0] = 0.0
+    undamped = ModalData(ref.sensors, (ModalDataSet(s.position, s.frequency, zeta, s.shapes),))
+    res = validate_identification(model=two_mass, params={}, reference=undamped, truth={}, n_freq=20)
+    # NDD divides by the reference damping: undefined (NaN) for the undamped mode, kept out of the statistics
+    assert np.isnan(res.ndd[0])
+    assert res.ndd[1] < 1e-9  # the exact modes of the same model
+    assert res.values("ndd").size == 1
+    assert res.statistics()["ndd"]["worst"] == res.ndd[1]
+
+
 def test_receptance_matches_the_mechanical_system_frf(bench):
     # the model's input F and output d sit at the sensor point tool, direction x
     freq = np.linspace(5.0, 900.0, 50)
@@ -496,5 +461,5 @@ def test_exact_problem_names_missing_modes(two_mass):
     space = ParameterSpace.from_model(nm, ["k11"])
     with pytest.raises(DataError, match="only 2 oscillatory model modes at position"):
         ExactModalProblem(nm, space, three, (1.0, 1.0, 1.0)).residuals(space.start)
-    with pytest.raises(DataError, match="only 2 elastic model modes at position"):
+    with pytest.raises(DataError, match="only 2 oscillatory model modes at position"):
         validate_identification(model=nm, params={}, reference=three, n_freq=10)

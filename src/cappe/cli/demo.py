@@ -79,7 +79,7 @@ def run(args: argparse.Namespace) -> int:
 def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[str]:
     """The paper's ideal case: a random truth within the bounds, noise-free reference modes at the four axis
     positions, the automated GSA-guided identification, validation at the held-out position z = -0.294 m."""
-    from cappe.cli.identify import _text
+    from cappe.cli.identify import summary_text
     from cappe.estimate import AutomatedIdentification, ParameterSpace
     from cappe.modal import reference_modes
     from cappe.report import write_html_report
@@ -103,7 +103,7 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
     return [
         "== uniaxial machine tool (Ellinger & Zaeh 2022, 3.1): automated identification, ideal case ==",
         f"random truth within the bounds (seed {args.seed}), noise-free reference: 20 modes at 4 positions",
-        _text(result, truth, "uniaxial-machine-tool"),
+        summary_text(result, truth, "uniaxial-machine-tool"),
         f"identification done in {elapsed:.1f} s; report written to {args.report}",
     ]
 

@@ -133,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         write_html_report(args.report, result=result, gsa=estimator.gsa_, validation=estimator.validation_,
                           truth=truth, title=f"{structure.name}: automated identification")
         doc["diagnostics"]["report"] = args.report
-    text = _text(result, truth, structure.name)
+    text = summary_text(result, truth, structure.name)
     if args.report:
         text += f"\nreport written to {args.report}"
     if args.out:
@@ -151,7 +151,8 @@ def _row_stats(label: str, stats: dict[str, dict[str, float]]) -> list[str]:
     return lines
 
 
-def _text(result: Any, truth: dict[str, float] | None, model_name: str) -> str:
+def summary_text(result: Any, truth: dict[str, float] | None, model_name: str) -> str:
+    """The printed summary of an automated identification (also used by ``cappe demo``)."""
     diag = result.diagnostics
     settings = diag.get("settings", {})
     lines = [f"{model_name}: automated identification of {len(result.names)} unknowns "

@@ -250,7 +250,7 @@ def _frf_path(path: str, position: dict[str, float], several: bool) -> Path:
 
 def _run_modal(args: argparse.Namespace) -> int:
     from cappe.io import write_frf, write_modal_data, write_uff_modal
-    from cappe.modal._reference import reference_frf, reference_modes, sensor_coordinates
+    from cappe.modal import reference_frf, reference_modes, sensor_coordinates
 
     if args.frf is None:
         stray = [flag for dest, flag in (("driving_points", "--driving-points"), ("frf_outputs", "--frf-outputs"),

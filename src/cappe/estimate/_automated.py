@@ -58,15 +58,15 @@ from typing import Any, ClassVar
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment, lsq_linear
+from scipy.optimize import lsq_linear
 
 from cappe._rng import RandomLike
-from cappe.correlate import macxp, macxp_paired
+from cappe.correlate import macxp_paired
 from cappe.estimate._base import _LAST_FIT, Estimator, fit_least_squares
 from cappe.estimate._modal_updating import ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._validation import ValidationResult, find_set, summarize, validate_identification
+from cappe.estimate._validation import ValidationResult, _pair, find_set, summarize, validate_identification
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
@@ -439,16 +439,6 @@ class DampingLeastSquares:
         }
 
 
-def _pair_modes(shapes: Array, poles: CArray, data_set: ModalDataSet) -> NDArray[np.intp]:
-    """Model mode (one-to-one, maximal total MACXP) of every reference mode."""
-    valid = np.flatnonzero(np.abs(poles) > 0)
-    matrix = macxp(shapes[:, valid].astype(complex), poles[valid], data_set.shapes, data_set.poles)
-    rows, cols = linear_sum_assignment(matrix, maximize=True)
-    out = np.empty(data_set.n_modes, dtype=np.intp)
-    out[cols] = valid[rows]
-    return out
-
-
 def damping_least_squares(
     *,
     model: NumericModel,
@@ -519,7 +509,7 @@ def damping_least_squares(
         position = model.structure.resolve_position(data_set.position)
         batch = engine.evaluate(p, position, contributions=True)
         assert batch.damping_gradient is not None  # contributions=True
-        model_of = _pair_modes(batch.shapes[0], batch.first_order_poles[0], data_set)
+        model_of, _ = _pair(batch.shapes[0].astype(complex), batch.first_order_poles[0], data_set)
         grad = batch.damping_gradient[0][model_of][:, cols]  # (m, n_d)
         known = batch.damping[0][model_of] - grad @ p[cols]
         for r in range(data_set.n_modes):
@@ -572,10 +562,6 @@ def damping_least_squares(
 # -------------------------------------------------------------------------------------------------------------
 # the estimator
 # -------------------------------------------------------------------------------------------------------------
-
-
-def _position_label(position: Mapping[str, float]) -> str:
-    return ",".join(f"{k}={v:g}" for k, v in position.items()) or "-"
 
 
 class AutomatedIdentification(Estimator):
@@ -1142,18 +1128,6 @@ class ExactModalProblem:
         assert batch.complex_shapes is not None
         return batch.poles, batch.complex_shapes
 
-    def _pairing(self, poles: CArray, shapes: CArray, data_set: ModalDataSet) -> NDArray[np.intp]:
-        valid = np.flatnonzero(np.isfinite(poles) & (np.abs(poles) > 0))
-        if valid.size < data_set.n_modes:
-            msg = (f"only {valid.size} oscillatory model modes at position {data_set.position}; the reference has "
-                   f"{data_set.n_modes}")
-            raise DataError(msg)
-        matrix = macxp(shapes[:, valid], poles[valid], data_set.shapes, data_set.poles)
-        rows, cols = linear_sum_assignment(matrix, maximize=True)
-        out = np.empty(data_set.n_modes, dtype=np.intp)
-        out[cols] = valid[rows]
-        return out
-
     def _residual(self, poles: CArray, shapes: CArray, k: int, index: NDArray[np.intp]) -> Array:
         """Residuals (B, n_r) of a batch with a fixed pairing."""
         data_set = self.reference.sets[k]
@@ -1186,7 +1160,7 @@ class ExactModalProblem:
         res, pairs = [], []
         for k, data_set in enumerate(self.reference.sets):
             poles, shapes = self._modes(full, k)
-            index = self._pairing(poles[0], shapes[0], data_set)
+            index, _ = _pair(shapes[0], poles[0], data_set)
             pairs.append(index)
             res.append(self._residual(poles, shapes, k, index)[0])
         out = (np.concatenate(res), pairs)

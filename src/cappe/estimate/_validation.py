@@ -3,7 +3,8 @@
 Modal criteria, per reference mode r paired with the model mode of largest MACXP (one-to-one assignment):
 
 - ``macxp[r]``: MACXP (paper eq. 4) of the pair, from the model's exact complex modes by default;
-- ``nfd[r] = |f_m - f_r| / f_r`` and ``ndd[r] = |zeta_m - zeta_r| / zeta_r`` (eq. 5 without the square).
+- ``nfd[r] = |f_m - f_r| / f_r`` and ``ndd[r] = |zeta_m - zeta_r| / zeta_r`` (eq. 5 without the square;
+  :func:`cappe.correlate.nfd`, :func:`cappe.correlate.ndd`).
 
 FRF criteria, per frequency response function (output channel j, input channel k), over ``freq``:
 
@@ -39,9 +40,8 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
 
-from cappe.correlate import csf, frac, macxp
+from cappe.correlate import csf, frac, ndd, nfd, pair_modes
 from cappe.exceptions import DataError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
@@ -175,11 +175,6 @@ def find_set(reference: ModalData, position: Mapping[str, float], model: Numeric
     raise DataError(msg)
 
 
-def _poles(freq: Array, zeta: Array) -> CArray:
-    w = 2 * np.pi * freq
-    return np.asarray(-zeta * w + 1j * w * np.sqrt(np.clip(1 - zeta**2, 0, None)), dtype=complex)
-
-
 def model_receptance(
     model: NumericModel,
     params: ArrayLike,
@@ -235,19 +230,20 @@ def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, o
 
 
 def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet) -> tuple[NDArray[np.intp], Array]:
-    """One-to-one pairing by MACXP (maximal total); returns the model mode of each reference mode and the matrix."""
-    valid = np.isfinite(model_poles) & (np.abs(model_poles) > 0)
-    idx = np.flatnonzero(valid)
+    """One-to-one pairing by MACXP, maximal total (:func:`cappe.correlate.pair_modes`), of the model modes with a
+    finite nonzero pole: the model mode of each reference mode, and the MACXP matrix (n_model, m; zero rows for
+    the other model modes)."""
+    idx = np.flatnonzero(np.isfinite(model_poles) & (np.abs(model_poles) > 0))
     if idx.size < data_set.n_modes:
-        msg = (f"only {idx.size} elastic model modes at position {data_set.position}; the reference has "
+        msg = (f"only {idx.size} oscillatory model modes at position {data_set.position}; the reference has "
                f"{data_set.n_modes}")
         raise DataError(msg)
-    matrix = macxp(model_shapes[:, idx], model_poles[idx], data_set.shapes, data_set.poles)
-    rows, cols = linear_sum_assignment(matrix, maximize=True)
+    pairing = pair_modes(phi_a=model_shapes[:, idx], lam_a=model_poles[idx], phi_x=data_set.shapes,
+                         lam_x=data_set.poles, threshold=0.0)
     model_of = np.empty(data_set.n_modes, dtype=np.intp)
-    model_of[cols] = idx[rows]
+    model_of[pairing.index_x] = idx[pairing.index_a]
     full = np.zeros((model_poles.size, data_set.n_modes))
-    full[idx] = matrix
+    full[idx] = pairing.matrix
     return model_of, full
 
 
@@ -321,8 +317,10 @@ def validate_identification(
     f_model = omega_m / (2 * np.pi)
     zeta_model = -poles[model_of].real / omega_m
     values = matrix[model_of, np.arange(data_set.n_modes)]
-    nfd = np.abs(f_model - data_set.frequency) / data_set.frequency
-    ndd = np.abs(zeta_model - data_set.damping) / np.where(data_set.damping > 0, data_set.damping, np.nan)
+    nfd_v = nfd(f_model, data_set.frequency)
+    damped = data_set.damping > 0  # NDD of an undamped reference mode is undefined: NaN, left out of statistics
+    ndd_v = np.full(data_set.n_modes, np.nan)
+    ndd_v[damped] = ndd(zeta_model[damped], data_set.damping[damped])
     n_show = min(poles.size, max(data_set.n_modes + 4, int(model_of.max()) + 1))
 
     f_grid = (np.linspace(0.0, 1.25 * float(data_set.frequency.max()), n_freq + 1)[1:] if freq is None
@@ -362,7 +360,7 @@ def validate_identification(
             "model": h_mod[o_best, i_best]}
     return ValidationResult(
         position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
-        model_frequency=f_model, macxp=values, nfd=nfd, ndd=ndd, macxp_matrix=matrix[:n_show], freq=f_grid,
+        model_frequency=f_model, macxp=values, nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,
         outputs=tuple(sensors), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
         overlay=kept,
     )

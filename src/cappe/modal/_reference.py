@@ -315,7 +315,7 @@ def reference_frf(
     (('n1:x', 'd1'), True)
     """
     nm = _numeric(model)
-    f = np.asarray(freq, dtype=float) if np.ndim(freq) else np.atleast_1d(np.asarray(freq, dtype=float))
+    f = np.atleast_1d(np.asarray(freq, dtype=float))
     if f.ndim != 1 or f.size == 0 or not np.all(np.isfinite(f)) or np.any(f < 0):
         msg = f"freq must be a non-empty 1-D array of finite frequencies >= 0 Hz; got shape {f.shape}"
         raise DataError(msg)

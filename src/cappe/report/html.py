@@ -41,15 +41,25 @@ def _pyplot() -> Any:
     return plt
 
 
-def _png(fig: Any) -> str:
-    """``<img>`` tag of a matplotlib figure (base64 PNG); closes the figure."""
+def _img(png: bytes, alt: str = "figure") -> str:
+    """Inline ``<img>`` tag of PNG bytes (base64)."""
+    data = base64.b64encode(png).decode("ascii")
+    return f'<img src="data:image/png;base64,{data}" alt="{_e(alt)}">'
+
+
+def _png(fig: Any, alt: str = "figure", *, tight_layout: bool = True) -> str:
+    """``<img>`` tag of a matplotlib figure (base64 PNG); closes the figure.
+
+    ``tight_layout=False`` crops to the drawn content instead (for figures, such as a colorbar shared by several
+    axes, that tight_layout cannot handle).
+    """
     plt = _pyplot()
     buffer = io.BytesIO()
-    fig.tight_layout()
-    fig.savefig(buffer, format="png", dpi=100)
+    if tight_layout:
+        fig.tight_layout()
+    fig.savefig(buffer, format="png", dpi=100, bbox_inches=None if tight_layout else "tight")
     plt.close(fig)
-    data = base64.b64encode(buffer.getvalue()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="figure">'
+    return _img(buffer.getvalue(), alt)
 
 
 def _e(value: Any) -> str:
@@ -149,8 +159,7 @@ def _sobol_bars(gsa: Any, top: int, max_panels: int) -> str:
     with tempfile.TemporaryDirectory() as folder:
         target = Path(folder) / "sobol.png"
         sobol_plot(gsa.sobol, target, outputs=chosen, top=top)
-        data = base64.b64encode(target.read_bytes()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="Sobol indices">'
+        return _img(target.read_bytes(), "Sobol indices")
 
 
 def _statistics(label: str, stats: Mapping[str, Mapping[str, float]]) -> str:
@@ -197,11 +206,7 @@ def _macxp_matrices(results: Sequence[Any]) -> str:
         ax.set_yticks(range(res.macxp_matrix.shape[0]), [str(i + 1) for i in range(res.macxp_matrix.shape[0])],
                       fontsize=6)
     fig.colorbar(image, ax=axes[0].tolist(), label="MACXP", shrink=0.8)
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", dpi=100, bbox_inches="tight")
-    plt.close(fig)
-    data = base64.b64encode(buffer.getvalue()).decode("ascii")
-    return f'<img src="data:image/png;base64,{data}" alt="MACXP matrices">'
+    return _png(fig, "MACXP matrices", tight_layout=False)
 
 
 def write_html_report(
