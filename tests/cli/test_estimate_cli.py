@@ -125,6 +125,24 @@ def test_response_plot_before_and_after(capsys, tmp_path, rig_data):
     assert "--plot-response needs time data or FRFs" in err
 
 
+def test_response_plot_of_frfs(capsys, tmp_path):
+    """The FRF branch of --plot-response: one panel per (output, input) pair of the measured FRFs."""
+    import numpy as np
+
+    from cappe.io import write_frf
+    from cappe.model import NumericModel, load_model
+
+    data = tmp_path / "h.npz"
+    system = NumericModel(load_model("builtin:two-mass-rig")).system()
+    write_frf(data, system.frf(np.linspace(5.0, 300.0, 120), outputs=["d1", "d2"]))
+    plot = tmp_path / "frf.png"
+    code, out, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", data, "--method", "one-step-frf",
+                         "--unknowns", "k11", "--plot-response", plot, "--json")
+    assert code == 0, err
+    assert json.loads(out)["diagnostics"]["plot_response"] == str(plot)
+    assert plot.stat().st_size > 20000  # four panels of curves
+
+
 def test_landscape_plot(capsys, tmp_path, rig_data):
     plot = tmp_path / "land.png"
     code, _, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "one-step",

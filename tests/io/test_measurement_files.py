@@ -175,9 +175,22 @@ def test_format_selection_errors(tmp_path):
         write_time_data(tmp_path / "run.dat", data)
     with pytest.raises(DataError, match=r"format must be one of \['uff', 'uff-binary', 'csv', 'npz'\] or None; got 'xlsx'"):
         read_frf(tmp_path / "run.csv", format="xlsx")
-    with pytest.raises(DataError, match=r"data must be a TimeData; got dict"):
-        write_time_data(tmp_path / "run.csv", {"a": [1.0]})  # type: ignore[arg-type]
+    for name in ("run.csv", "run.npz", "run.uff"):
+        with pytest.raises(DataError, match=r"data must be a TimeData; got dict"):
+            write_time_data(tmp_path / name, {"a": [1.0]})  # type: ignore[arg-type]
+        with pytest.raises(DataError, match=r"frf must be an FRFData; got dict"):
+            write_frf(tmp_path / name, {"H": [1.0]})  # type: ignore[arg-type]
     assert list(tmp_path.iterdir()) == []
+
+
+def test_every_format_is_written_with_the_usual_permissions(tmp_path):
+    """Atomic writes go through mkstemp (mode 0600); the finished file must get the mode a plain write gives."""
+    data = TimeData.from_rate(10.0, {"a": [1.0, 2.0]})
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    expected = plain.stat().st_mode & 0o777
+    for name, fmt in (("t.csv", None), ("t.npz", None), ("t.uff", None), ("t.bin", "uff-binary")):
+        assert write_time_data(tmp_path / name, data, format=fmt).stat().st_mode & 0o777 == expected, name
 
 
 def test_read_measurements_dispatch_errors(tmp_path):

@@ -64,8 +64,12 @@ def test_length_name_and_unit_rules():
         TimeData(_t(), np.zeros((2, 50)), ("F",))
     with pytest.raises(DataError, match=r"units must list one unit per channel \(1\); got 2"):
         TimeData(_t(), np.zeros((1, 50)), ("F",), ("N", "m"))
-    with pytest.raises(DataError, match=r"sampling rate fs must be a positive finite number in Hz; got -1.0"):
+    with pytest.raises(DataError, match=r"argument 'fs' must be > 0 Hz; got -1.0"):
         TimeData.from_rate(-1.0, {"F": np.zeros(5)})
+    with pytest.raises(DataError, match=r"argument 'fs' must be finite; got inf"):
+        TimeData.from_rate(np.inf, {"F": np.zeros(5)})
+    with pytest.raises(DataError, match=r"argument 'fs' must be a real number; got 'fast'"):
+        TimeData.from_rate("fast", {"F": np.zeros(5)})
     data = TimeData.from_rate(100.0, {"F": np.zeros(5)})
     with pytest.raises(DataError, match=r"unknown channel 'x'; the data has \['F'\]"):
         data.channel("x")

@@ -297,6 +297,9 @@ def test_frf_grid_and_duplicate_errors(tmp_path):
                                                {**rec, "func_type": 6, "data": np.ones(5)}])
     with pytest.raises(DataError, match=r"part\.uff has coherence for some FRFs but not for \['2:\+x/9:\+x'\]"):
         read_uff_frf(part)
+    clash = _foreign_58(tmp_path / "clash.uff", [rec, *[{**rec, "func_type": 6, "data": np.ones(5)}] * 2])
+    with pytest.raises(DataError, match=r"datasets #2 and #3 of .*clash\.uff both hold coherence for '1:\+x'/'9:\+x'"):
+        read_uff_frf(clash)
 
 
 def test_frf_write_validation(tmp_path):

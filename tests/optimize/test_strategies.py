@@ -333,6 +333,7 @@ def test_multiple_x0_rows_are_all_started():
         ({"cluster_tol": 2.0}, r"cluster_tol must lie in \(0, 1\)"),
         ({"strategy": "direct", "options": {"popsize": 5}}, r"options for strategy 'direct' may be .*; got unknown \['popsize'\]"),
         ({"options": {"local_maxiter": 0}}, r"options\['local_maxiter'\] must be an integer >= 1; got 0"),
+        ({"options": {"local_maxiter": True}}, r"options\['local_maxiter'\] must be an integer >= 1; got True"),
         ({"vectorized": True, "fun": None, "residuals": np.sin}, r"vectorized=True applies to fun, but fun is None"),
     ],
 )

@@ -45,6 +45,9 @@ def test_gif_has_the_requested_frames_and_they_move(tmp_path):
         third = np.asarray(im.convert("RGB"), dtype=int)
     assert np.abs(first - third).sum() > 0
     assert sorted(p.name for p in tmp_path.iterdir()) == ["motion.gif"]  # no temp file left behind
+    plain = tmp_path / "plain.txt"
+    plain.write_text("x")
+    assert out.stat().st_mode & 0o777 == plain.stat().st_mode & 0o777  # the usual mode, not mkstemp's 0600
 
 
 def test_html_is_self_contained_with_the_animation_script(tmp_path):

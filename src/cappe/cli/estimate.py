@@ -167,10 +167,14 @@ def _plot_response(ctx: ModelContext, estimator: Any, result: Any, data: Any, pa
                       curves[1][:, window], path, labels=outputs,
                       title=f"{result.method}: measured vs model (last {data.time[window].size} samples)")
     elif kind == "frf":
-        pairs = [(o, i) for o in data.output_names for i in data.input_names]
-        measured = np.array([np.abs(data.response(o, i)) for o, i in pairs])
-        curves = [np.array([np.abs(s.frf(data.freq, i, o).H[0, 0]) for o, i in pairs]) for s in (before, after)]
-        response_plot(data.freq, measured, curves[0], curves[1], path, labels=[f"{o}/{i}" for o, i in pairs],
+        # one curve per (output, input) pair, outputs major: the row order of H[out, in, freq] flattened
+        inputs, outputs = list(data.input_names), list(data.output_names)
+        measured, model_before, model_after = (
+            np.abs(frf.H).reshape(-1, data.freq.size)
+            for frf in (data, before.frf(data.freq, inputs, outputs), after.frf(data.freq, inputs, outputs))
+        )
+        response_plot(data.freq, measured, model_before, model_after, path,
+                      labels=[f"{o}/{i}" for o in outputs for i in inputs],
                       xlabel="frequency (Hz)", log=True, title=f"{result.method}: measured vs model FRFs")
     else:
         msg = "--plot-response needs time data or FRFs; modal data have no response to plot"

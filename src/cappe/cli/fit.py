@@ -52,15 +52,16 @@ def _estimator(structure: str, n: int, nk: int) -> Any:
     return BoxJenkins(n, n, n, n, nk)
 
 
-def _order(text: str) -> int | None:
-    if text == "auto":
+def _count_or_auto(text: str | None, option: str, what: str) -> int | None:
+    """``auto`` (or the option not given) -> None, else an integer >= 1."""
+    if text is None or text == "auto":
         return None
     try:
         n = int(text)
     except ValueError:
         n = 0
     if n < 1:
-        msg = f"--order must be a positive integer or 'auto'; got {text!r}"
+        msg = f"{option} must be {what} or 'auto'; got {text!r}"
         raise UsageError(msg)
     return n
 
@@ -83,16 +84,8 @@ def run(args: argparse.Namespace) -> int:
     from cappe.identify import OE, prune, select_order
     from cappe.io import read_time_data
 
-    n = _order(args.order)
-    prune_to: int | None = None
-    if args.prune is not None and args.prune != "auto":
-        try:
-            prune_to = int(args.prune)
-        except ValueError:
-            prune_to = 0
-        if prune_to < 1:
-            msg = f"--prune must be a positive number of modes or 'auto'; got {args.prune!r}"
-            raise UsageError(msg)
+    n = _count_or_auto(args.order, "--order", "a positive integer")
+    prune_to = _count_or_auto(args.prune, "--prune", "a positive number of modes")
     if (args.refine or args.plot or args.cutoff is not None) and args.prune is None:
         msg = "--refine, --plot and --cutoff act on a pruned model; add --prune N or --prune auto"
         raise UsageError(msg)

@@ -9,7 +9,7 @@ from typing import Literal
 
 import numpy as np
 
-from cappe.cli._common import add_output_options, band, emit
+from cappe.cli._common import UsageError, add_output_options, band, emit
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -32,7 +32,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
-    from cappe.cli._common import UsageError
     from cappe.identify import coherence_summary, estimate_frf
     from cappe.io import read_time_data, write_frf
 

@@ -38,7 +38,7 @@ import sympy as sp
 from numpy.typing import ArrayLike, NDArray
 from scipy.integrate import cumulative_trapezoid
 
-from cappe._arguments import is_numeric, positive_number
+from cappe._arguments import is_numeric, positive_number, real_number
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
 from cappe.io.timedata import TimeData
 from cappe.model.numeric import NumericModel, ParamsLike
@@ -227,12 +227,8 @@ def nine_accelerometer_layout(
 
 
 def _arm(name: str, value: Any) -> float:
-    try:
-        out = float(value)
-    except (TypeError, ValueError):
-        msg = f"arm length {name!r} must be a non-zero number in m; got {value!r}"
-        raise DataError(msg) from None
-    if not math.isfinite(out) or out == 0:
+    out = real_number(name, value)
+    if out == 0:
         msg = f"arm length {name!r} must be a non-zero finite number in m; got {value!r}"
         raise DataError(msg)
     return out
@@ -615,6 +611,12 @@ def body_geometry(
     return out
 
 
+def _sensor_points(geo: BodyGeometry) -> Array:
+    """The sensor nodes among a body's points, shape (k, 3) (k may be 0)."""
+    rows = [p for p, lab in zip(geo.points, geo.labels, strict=True) if lab.startswith("sensor:")]
+    return np.array(rows, dtype=float).reshape(-1, 3)
+
+
 # -- signal-based motion ----------------------------------------------------------------------------------------
 @dataclass
 class _BodyFit:
@@ -685,8 +687,7 @@ def _model_bodies(
         active = np.zeros(6, dtype=bool)
         active[dof_index] = True
         geo = geometry[b]
-        sensor_pts = [p for p, lab in zip(geo.points, geo.labels, strict=True) if lab.startswith("sensor:")]
-        fits.append(_BodyFit(b, [c[0] for c in chans], full, active, geo.reference, np.array(sensor_pts)))
+        fits.append(_BodyFit(b, [c[0] for c in chans], full, active, geo.reference, _sensor_points(geo)))
     return fits
 
 
@@ -752,16 +753,20 @@ def _channel_weights(weights: Mapping[str, float] | None, data: TimeData, used: 
         if c not in out:
             msg = f"weights: channel {c!r} is not a sensor channel of the fit; sensor channels: {list(used)}"
             raise DataError(msg)
-        try:
-            value = float(w)
-        except (TypeError, ValueError):
-            msg = f"weights: weight of channel {c!r} must be a number >= 0; got {w!r}"
-            raise DataError(msg) from None
-        if not (math.isfinite(value) and value >= 0):
-            msg = f"weights: weight of channel {c!r} must be a finite number >= 0; got {w!r}"
-            raise DataError(msg)
-        out[c] = value
+        out[c] = _weight(f"weight of channel {c!r}", w)
     return out
+
+
+def _weight(what: str, value: Any) -> float:
+    try:
+        number = float(value)
+    except (TypeError, ValueError):
+        msg = f"weights: {what} must be a number >= 0; got {value!r}"
+        raise DataError(msg) from None
+    if not (math.isfinite(number) and number >= 0):
+        msg = f"weights: {what} must be a finite number >= 0; got {value!r}"
+        raise DataError(msg)
+    return number
 
 
 def _describe(vector: Array, names: Sequence[str]) -> str:
@@ -1084,15 +1089,13 @@ def model_rigid_body_motion(
                 vel[i, :, k] = x[:, n + j]
                 disp[i, :, k] = x[:, j]
         geo = geometry[name]
-        sensor_pts = [p for p, lab in zip(geo.points, geo.labels, strict=True) if lab.startswith("sensor:")]
-        points.append(np.array(sensor_pts) if sensor_pts else geo.reference[None, :].copy())
+        sensor_pts = _sensor_points(geo)
+        points.append(sensor_pts if sensor_pts.size else geo.reference[None, :].copy())
     low: float | None = None
     high: float | None = None
     if f_min is not None:
         low, high = _band_limits(f_min, f_max, data.fs)
-        vel, disp = integrate_acceleration(
-            acc, fs=data.fs, f_min=low, f_max=high, filter_order=_filter_order(filter_order), axis=1
-        )
+        vel, disp = integrate_acceleration(acc, fs=data.fs, f_min=low, f_max=high, filter_order=filter_order, axis=1)
     elif f_max is not None:
         msg = "f_max needs f_min: band-limited integration is used only when f_min is given"
         raise DataError(msg)
@@ -1173,14 +1176,7 @@ def _component_weights(weights: Mapping[str, float] | None, bodies: Sequence[str
                 f"{', '.join(RIGID_BODY_DOFS)}; compared bodies: {list(bodies)}"
             )
             raise DataError(msg)
-        try:
-            number = float(value)
-        except (TypeError, ValueError):
-            msg = f"weights: weight {key!r} must be a number >= 0; got {value!r}"
-            raise DataError(msg) from None
-        if not (math.isfinite(number) and number >= 0):
-            msg = f"weights: weight {key!r} must be a finite number >= 0; got {value!r}"
-            raise DataError(msg)
+        number = _weight(f"weight {key!r}", value)
         i = list(bodies).index(body)
         if dof:
             w[i, RIGID_BODY_DOFS.index(dof)] = number

@@ -133,11 +133,11 @@ def write_time_data(path: str | Path, data: TimeData, *, format: str | None = No
     """
     p = Path(path)
     fmt = _format(p, format)
+    if fmt in ("uff", "uff-binary"):
+        return write_uff_time_data(p, data, binary=fmt == "uff-binary")  # validates data itself
     if not isinstance(data, TimeData):
         msg = f"data must be a TimeData; got {type(data).__name__}"
         raise DataError(msg)
-    if fmt in ("uff", "uff-binary"):
-        return write_uff_time_data(p, data, binary=fmt == "uff-binary")
     if fmt == "csv":
         units = data.units or ("",) * data.n_channels
         header = ["time"] + [_unit_cell(c, u) for c, u in zip(data.channels, units, strict=True)]
@@ -194,9 +194,9 @@ def write_frf(path: str | Path, frf: FRFData, *, format: str | None = None) -> P
     """
     p = Path(path)
     fmt = _format(p, format)
-    check_frf(frf)
     if fmt in ("uff", "uff-binary"):
-        return write_uff_frf(p, frf, binary=fmt == "uff-binary")
+        return write_uff_frf(p, frf, binary=fmt == "uff-binary")  # validates frf itself
+    check_frf(frf)
     freq = np.asarray(frf.freq, dtype=float)
     H = np.asarray(frf.H, dtype=complex)
     if fmt == "csv":
@@ -445,14 +445,18 @@ def _read_table(p: Path) -> _Table:
     return _Table(p, header, header_line, row_lines, values, meta)
 
 
-def _time_from_table(table: _Table) -> TimeData:
-    p = table.path
-    if not _TIME_HEADER.match(table.header[0].strip()):
+def _check_first_column(table: _Table, header: re.Pattern[str], what: str, allowed: str) -> None:
+    if not header.match(table.header[0].strip()):
         msg = (
-            f"{p}, line {table.header_line}: the first column of time data must be 'time' or 'time [s]'; "
+            f"{table.path}, line {table.header_line}: the first column of {what} must be {allowed}; "
             f"got {table.header[0]!r}"
         )
         raise DataError(msg)
+
+
+def _time_from_table(table: _Table) -> TimeData:
+    p = table.path
+    _check_first_column(table, _TIME_HEADER, "time data", "'time' or 'time [s]'")
     names, units = [], []
     for cell in table.header[1:]:
         m = _UNIT.match(cell)
@@ -491,12 +495,7 @@ def _split_pair(cell: str) -> tuple[str, str] | None:
 
 def _frf_from_table(table: _Table) -> FRFData:
     p = table.path
-    if not _FREQ_HEADER.match(table.header[0].strip()):
-        msg = (
-            f"{p}, line {table.header_line}: the first column of FRF data must be 'frequency' or 'frequency [Hz]'; "
-            f"got {table.header[0]!r}"
-        )
-        raise DataError(msg)
+    _check_first_column(table, _FREQ_HEADER, "FRF data", "'frequency' or 'frequency [Hz]'")
     columns: dict[tuple[str, str], dict[str, int]] = {}
     for j, cell in enumerate(table.header[1:], start=1):
         pair_text, _, part = cell.rpartition(" ")

@@ -14,6 +14,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cappe._arguments import positive_number
 from cappe.exceptions import DataError, DataWarning
 
 __all__ = ["TimeData", "check_clipping"]
@@ -109,16 +110,14 @@ class TimeData:
     @classmethod
     def from_rate(cls, fs: float, channels: Mapping[str, ArrayLike], t0: float = 0.0) -> TimeData:
         """Build from a sampling rate ``fs`` (Hz) and a mapping ``name -> samples``."""
-        if not (np.isfinite(fs) and fs > 0):
-            msg = f"sampling rate fs must be a positive finite number in Hz; got {fs!r}"
-            raise DataError(msg)
+        rate = positive_number("fs", fs, "Hz")
         lengths = {name: np.asarray(v).size for name, v in channels.items()}
         n = max(lengths.values(), default=0)
         short = {name: size for name, size in lengths.items() if size != n}
         if short:
             msg = f"channels must all have the same length ({n} samples); different: {short}"
             raise DataError(msg)
-        return cls.from_channels(t0 + np.arange(n) / fs, channels)
+        return cls.from_channels(t0 + np.arange(n) / rate, channels)
 
     @property
     def n_samples(self) -> int:

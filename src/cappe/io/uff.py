@@ -82,6 +82,7 @@ import pyuff
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError, DataWarning
+from cappe.io.files import _umask
 from cappe.io.modal import MODAL_FORMAT, ModalData, modal_data_from_mapping
 from cappe.io.timedata import TimeData
 from cappe.systems.frf import FRFData
@@ -139,20 +140,22 @@ _UNIFORM_RTOL = 1e-6
 
 
 @contextlib.contextmanager
-def _atomic_path(path: str | Path) -> Iterator[Path]:
+def _atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
     """Yield an empty temporary file next to ``path``; rename it to ``path`` when the block succeeds.
 
-    A failed write removes the temporary file and leaves an existing ``path`` untouched.
+    A failed write removes the temporary file and leaves an existing ``path`` untouched. The file gets the usual
+    permissions (as :func:`cappe.io.files.write_text` gives them), not mkstemp's 0600.
     """
     target = Path(path)
     target.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=".tmp", dir=target.parent)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=target.parent)
     os.close(fd)
     tmp = Path(name)
     try:
         yield tmp
         with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
+        os.chmod(tmp, 0o666 & ~_umask())
         os.replace(tmp, target)
     except BaseException:
         tmp.unlink(missing_ok=True)
@@ -692,26 +695,13 @@ def read_uff_frf(path: str | Path) -> FRFData:
         raise DataError(msg)
     outputs = list(dict.fromkeys(c.output for c in frfs))
     inputs = list(dict.fromkeys(c.input for c in frfs))
-    freq = frfs[0].x
-    H = np.full((len(outputs), len(inputs), freq.size), np.nan, dtype=complex)
-    where: dict[tuple[int, int], int] = {}
-    for c in frfs:
-        _check_same_axis(p, c, frfs[0])
-        o, i = outputs.index(c.output), inputs.index(c.input)
-        if (o, i) in where:
-            msg = (
-                f"datasets #{where[o, i] + 1} and #{c.k + 1} of {p} both hold the FRF {c.output!r}/{c.input!r}"
-            )
-            raise DataError(msg)
-        where[o, i] = c.k
-        H[o, i] = c.values
-    missing = _missing_pairs(outputs, inputs, where)
+    H, missing = _grid(p, frfs, frfs[0], outputs, inputs, "the FRF", complex)
     if missing:
         msg = f"{p} lacks the FRF(s) {missing} to complete the {len(outputs)} x {len(inputs)} output x input grid"
         raise DataError(msg)
     coherence = _assemble_coherence(p, cohs, frfs[0], outputs, inputs) if cohs else None
     return FRFData(
-        freq=freq,
+        freq=frfs[0].x,
         H=H,
         input_names=tuple(inputs),
         output_names=tuple(outputs),
@@ -753,38 +743,40 @@ def _check_same_axis(p: Path, curve: _Curve, ref: _Curve) -> None:
         raise DataError(msg)
 
 
+def _grid(
+    p: Path, curves: Sequence[_Curve], ref: _Curve, outputs: Sequence[str], inputs: Sequence[str], what: str,
+    dtype: type,
+) -> tuple[NDArray[Any], list[str]]:
+    """Curves placed on the output x input grid (a multiple coherence on every input of its output), and the
+    ``"out/in"`` pairs no curve covers."""
+    grid: NDArray[Any] = np.full((len(outputs), len(inputs), ref.x.size), np.nan, dtype=dtype)
+    where: dict[tuple[int, int], int] = {}
+    for c in curves:
+        _check_same_axis(p, c, ref)
+        o = outputs.index(c.output)
+        for i in range(len(inputs)) if c.multiple else [inputs.index(c.input)]:
+            if (o, i) in where:
+                msg = f"datasets #{where[o, i] + 1} and #{c.k + 1} of {p} both hold {what} {c.output!r}/{inputs[i]!r}"
+                raise DataError(msg)
+            where[o, i] = c.k
+            grid[o, i] = c.values
+    missing = [f"{out}/{inp}" for o, out in enumerate(outputs) for i, inp in enumerate(inputs) if (o, i) not in where]
+    return grid, missing
+
+
 def _assemble_coherence(
     p: Path, cohs: Sequence[_Curve], ref: _Curve, outputs: Sequence[str], inputs: Sequence[str]
 ) -> NDArray[np.float64]:
-    coherence = np.full((len(outputs), len(inputs), ref.x.size), np.nan)
-    where: dict[tuple[int, int], int] = {}
     for c in cohs:
-        _check_same_axis(p, c, ref)
         if c.output not in outputs or (not c.multiple and c.input not in inputs):
             pair = f"{c.output!r} (multiple)" if c.multiple else f"{c.output!r}/{c.input!r}"
             msg = f"dataset #{c.k + 1} of {p} holds coherence for {pair}, which has no FRF"
             raise DataError(msg)
-        o = outputs.index(c.output)
-        for i in range(len(inputs)) if c.multiple else [inputs.index(c.input)]:
-            if (o, i) in where:
-                msg = (
-                    f"datasets #{where[o, i] + 1} and #{c.k + 1} of {p} both hold coherence for "
-                    f"{c.output!r}/{inputs[i]!r}"
-                )
-                raise DataError(msg)
-            where[o, i] = c.k
-            coherence[o, i] = c.values
-    missing = _missing_pairs(outputs, inputs, where)
+    coherence, missing = _grid(p, cohs, ref, outputs, inputs, "coherence for", float)
     if missing:
         msg = f"{p} has coherence for some FRFs but not for {missing}"
         raise DataError(msg)
     return coherence
-
-
-def _missing_pairs(
-    outputs: Sequence[str], inputs: Sequence[str], where: Mapping[tuple[int, int], int]
-) -> list[str]:
-    return [f"{out}/{inp}" for o, out in enumerate(outputs) for i, inp in enumerate(inputs) if (o, i) not in where]
 
 
 def _quantities(frfs: Sequence[_Curve], outputs: Sequence[str]) -> tuple[str, ...]:

@@ -528,10 +528,7 @@ def _validate_options(strategy: str, options: Mapping[str, Any] | None) -> tuple
         msg = f"options for strategy {strategy!r} may be {sorted(allowed)}; got unknown {unknown}"
         raise DataError(msg)
     local_maxiter = given.pop("local_maxiter", None)
-    if local_maxiter is not None and not (isinstance(local_maxiter, (int, np.integer)) and local_maxiter >= 1):
-        msg = f"options['local_maxiter'] must be an integer >= 1; got {local_maxiter!r}"
-        raise DataError(msg)
-    return given, None if local_maxiter is None else int(local_maxiter)
+    return given, None if local_maxiter is None else _positive_int("options['local_maxiter']", local_maxiter, 1)
 
 
 def _positive_int(name: str, value: Any, minimum: int) -> int:

@@ -11,8 +11,6 @@ Figures are :class:`matplotlib.figure.Figure` objects on an Agg canvas: no pyplo
 from __future__ import annotations
 
 import html
-import os
-import tempfile
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -28,6 +26,7 @@ from cappe.exceptions import DataError
 from cappe.identify._rigid_body import RIGID_BODY_DOFS, BodyGeometry, RigidBodyMotion, body_geometry
 from cappe.io.files import write_text
 from cappe.io.modal import ModalData, ModalDataSet
+from cappe.io.uff import _atomic_path
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.systems.modal import ModalSet
@@ -170,15 +169,8 @@ def _render(
 
     anim = FuncAnimation(fig, update, frames=n_frames, interval=1000.0 / fps, blit=False, repeat=True)
     if path.suffix.lower() == ".gif":
-        path.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".gif", dir=path.parent)
-        os.close(fd)
-        try:
+        with _atomic_path(path, suffix=".gif") as tmp:  # Pillow picks the format from the suffix
             anim.save(tmp, writer=PillowWriter(fps=fps), dpi=dpi)
-            os.replace(tmp, path)
-        except BaseException:
-            Path(tmp).unlink(missing_ok=True)
-            raise
     else:
         player = anim.to_jshtml(fps=fps, embed_frames=True, default_mode="loop")
         head = f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(suptitle)}</title></head>'
