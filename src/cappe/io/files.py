@@ -6,12 +6,14 @@ import json
 import math
 import os
 import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
 from cappe.exceptions import DataError
 
-__all__ = ["read_parameters", "write_json", "write_text"]
+__all__ = ["atomic_path", "read_parameters", "write_json", "write_text"]
 
 
 def read_parameters(path: str | Path) -> dict[str, float]:
@@ -37,22 +39,35 @@ def read_parameters(path: str | Path) -> dict[str, float]:
     return out
 
 
-def write_text(path: str | Path, text: str) -> Path:
-    """Write text atomically: a reader sees the old file or the new one, never half of it."""
-    p = Path(path)
-    p.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{p.name}.", dir=p.parent)
+@contextmanager
+def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
+    """Yield an empty temporary file next to ``path``; rename it to ``path`` when the block succeeds.
+
+    Readers see the old file or the new one, never half of it; a failed write removes the temporary file and leaves
+    an existing ``path`` untouched. ``suffix`` lets writers that pick a format by extension (Pillow) use it. The
+    file gets the usual (umask) permissions, not mkstemp's 0600.
+    """
+    target = Path(path)
+    target.parent.mkdir(parents=True, exist_ok=True)
+    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=target.parent)
+    os.close(fd)
+    tmp = Path(name)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8") as fh:
-            fh.write(text)
-            fh.flush()
+        yield tmp
+        with open(tmp, "rb") as fh:
             os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())  # mkstemp makes 0600; a written result gets the usual permissions
-        os.replace(tmp, p)
+        os.chmod(tmp, 0o666 & ~_umask())
+        os.replace(tmp, target)
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        tmp.unlink(missing_ok=True)
         raise
-    return p
+
+
+def write_text(path: str | Path, text: str) -> Path:
+    """Write text atomically (see :func:`atomic_path`)."""
+    with atomic_path(path) as tmp:
+        tmp.write_text(text, encoding="utf-8")
+    return Path(path)
 
 
 def _umask() -> int:

@@ -41,7 +41,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
-from cappe.io.files import write_text
+from cappe.io.files import atomic_path, write_text
 from cappe.io.timedata import TimeData
 from cappe.io.uff import (
     COHERENCE,
@@ -49,7 +49,6 @@ from cappe.io.uff import (
     MULTIPLE_COHERENCE,
     SUPPORTED,
     TIME,
-    _atomic_path,
     check_frf,
     read_uff_frf,
     read_uff_time_data,
@@ -598,7 +597,7 @@ def _meta_quantities(table: _Table, n_out: int) -> tuple[str, ...]:
 
 
 def _save_npz(p: Path, **arrays: Any) -> None:
-    with _atomic_path(p) as tmp, open(tmp, "wb") as fh:
+    with atomic_path(p) as tmp, open(tmp, "wb") as fh:
         np.savez(fh, **arrays)
 
 

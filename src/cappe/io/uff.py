@@ -68,11 +68,9 @@ import contextlib
 import io
 import json
 import math
-import os
 import re
-import tempfile
 import warnings
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -82,7 +80,7 @@ import pyuff
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError, DataWarning
-from cappe.io.files import _umask
+from cappe.io.files import atomic_path
 from cappe.io.modal import MODAL_FORMAT, ModalData, modal_data_from_mapping
 from cappe.io.timedata import TimeData
 from cappe.systems.frf import FRFData
@@ -139,31 +137,8 @@ _UNIFORM_RTOL = 1e-6
 # ----------------------------------------------------------------------------------------------- file handling
 
 
-@contextlib.contextmanager
-def _atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
-    """Yield an empty temporary file next to ``path``; rename it to ``path`` when the block succeeds.
-
-    A failed write removes the temporary file and leaves an existing ``path`` untouched. The file gets the usual
-    permissions (as :func:`cappe.io.files.write_text` gives them), not mkstemp's 0600.
-    """
-    target = Path(path)
-    target.parent.mkdir(parents=True, exist_ok=True)
-    fd, name = tempfile.mkstemp(prefix=f".{target.name}.", suffix=suffix, dir=target.parent)
-    os.close(fd)
-    tmp = Path(name)
-    try:
-        yield tmp
-        with open(tmp, "rb") as fh:
-            os.fsync(fh.fileno())
-        os.chmod(tmp, 0o666 & ~_umask())
-        os.replace(tmp, target)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
-
-
 def _write_datasets(path: str | Path, datasets: Sequence[dict[str, Any]]) -> None:
-    with _atomic_path(path) as tmp:
+    with atomic_path(path) as tmp:
         # 'add' on the fresh empty file: pyuff's 'overwrite' truncates the header of a first binary 58 dataset
         try:
             with warnings.catch_warnings():

@@ -24,9 +24,8 @@ from scipy.spatial.distance import pdist, squareform
 from cappe._arguments import positive_number
 from cappe.exceptions import DataError
 from cappe.identify._rigid_body import RIGID_BODY_DOFS, BodyGeometry, RigidBodyMotion, body_geometry
-from cappe.io.files import write_text
+from cappe.io.files import atomic_path, write_text
 from cappe.io.modal import ModalData, ModalDataSet
-from cappe.io.uff import _atomic_path
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.systems.modal import ModalSet
@@ -169,7 +168,7 @@ def _render(
 
     anim = FuncAnimation(fig, update, frames=n_frames, interval=1000.0 / fps, blit=False, repeat=True)
     if path.suffix.lower() == ".gif":
-        with _atomic_path(path, suffix=".gif") as tmp:  # Pillow picks the format from the suffix
+        with atomic_path(path, suffix=".gif") as tmp:  # Pillow picks the format from the suffix
             anim.save(tmp, writer=PillowWriter(fps=fps), dpi=dpi)
     else:
         player = anim.to_jshtml(fps=fps, embed_frames=True, default_mode="loop")
