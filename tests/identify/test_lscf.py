@@ -388,7 +388,7 @@ ERRORS = [
     (lambda: lscf_poles(_frf(freq=np.array([1.0]), H=np.ones((1, 1, 1))), band=(0, 1)), r"1-D with at least 2 lines"),
     (lambda: lscf_poles(_frf(freq=np.array([0.0, 2.0, 1.0])), band=(0, 1)), r"strictly increasing"),
     (lambda: lscf_poles(_frf(H=np.ones((1, 2, 201))), band=(0, 1)), r"shape \(n_out, n_in, n_freq\) = \(1, 1, 201\)"),
-    (lambda: lscf_poles(_frf(window_decay=-1.0), band=(1, 50)), r"window_decay .* must be > 0 s; got -1.0"),
+    (lambda: lscf_poles(_frf(window_decay=-1.0), band=(1, 50)), r"FRF window_decay must be None or a time constant > 0 in s; got -1.0"),
     (lambda: lscf_poles(_frf(), band=5.0), r"band must be a pair \(f_lo, f_hi\) in Hz; got 5.0"),
     (lambda: lscf_poles(_frf(), band=(10.0, 150.0)), r"band \(10, 150\) Hz .* data's frequency range \[0, 100\] Hz"),
     # overshooting the data by more than one line (0.5 Hz here) is an error; less is clipped (see below)
@@ -442,7 +442,7 @@ ERRORS = [
     ),
     (
         lambda: lsfd(_frf(output_quantities=("velocity", "velocity")), poles=[-1 + 60j], band=(1, 50)),
-        r"output_quantities must name one quantity per output \(1\); got 2",
+        r"FRF output_quantities must list one quantity per output \(1\); got 2",
     ),
     (
         lambda: lsfd(_frf(), poles=[-1 - 60j], band=(1, 50)),

@@ -55,7 +55,7 @@ ComplexArray = NDArray[np.complex128]
 
 # -- validation -----------------------------------------------------------------------------------------------
 def _check_frf(frf: FRFData) -> tuple[FloatArray, ComplexArray]:
-    """Frequency axis and FRF array of ``frf``, validated."""
+    """Frequency axis and FRF array of ``frf``: at least 2 lines, finite, >= 0 and strictly increasing."""
     freq = np.asarray(frf.freq, dtype=float)
     H = np.asarray(frf.H)
     if freq.ndim != 1 or freq.size < 2:
@@ -67,14 +67,7 @@ def _check_frf(frf: FRFData) -> tuple[FloatArray, ComplexArray]:
             f"{freq[0]:g} .. {freq[-1]:g} Hz with {int(np.sum(np.diff(freq) <= 0))} non-increasing steps"
         )
         raise DataError(msg)
-    expected = (len(frf.output_names), len(frf.input_names), freq.size)
-    if H.shape != expected:
-        msg = f"FRF array H must have shape (n_out, n_in, n_freq) = {expected}; got {H.shape}"
-        raise DataError(msg)
-    if frf.window_decay is not None and not (np.isfinite(frf.window_decay) and frf.window_decay > 0):
-        msg = f"FRF window_decay (exponential window time constant) must be > 0 s; got {frf.window_decay!r}"
-        raise DataError(msg)
-    return freq, H.astype(complex)
+    return freq, H.astype(complex)  # shapes and window_decay are checked by FRFData itself
 
 
 def _band_lines(freq: FloatArray, band: Sequence[float]) -> tuple[tuple[float, float], NDArray[np.intp]]:

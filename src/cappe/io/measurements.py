@@ -546,16 +546,10 @@ def _frf_from_table(table: _Table) -> FRFData:
         H[o, i] = v[:, parts["re"]] + 1j * v[:, parts["im"]]
         if coherence is not None:
             coherence[o, i] = v[:, parts["coh"]]
-    frf = FRFData(
-        freq=v[:, 0].copy(),
-        H=H,
-        input_names=tuple(inputs),
-        output_names=tuple(outputs),
-        output_quantities=_meta_quantities(table, len(outputs)),
-        coherence=coherence,
-        window_decay=_meta_decay(table),
-    )
+    quantities, decay = _meta_quantities(table, len(outputs)), _meta_decay(table)
     try:
+        frf = FRFData(freq=v[:, 0].copy(), H=H, input_names=tuple(inputs), output_names=tuple(outputs),
+                      output_quantities=quantities, coherence=coherence, window_decay=decay)
         check_frf(frf)
     except DataError as exc:
         raise _prefixed(p, exc) from exc
@@ -651,16 +645,17 @@ def _frf_from_npz(p: Path, arrays: dict[str, NDArray[Any]]) -> FRFData:
     kind = "FRF data"
     _check_npz_format(p, arrays, FRF_NPZ_FORMAT)
     decay = float(arrays["window_decay"]) if "window_decay" in arrays else float("nan")
-    frf = FRFData(
-        freq=np.asarray(_npz_array(p, arrays, "freq", kind), dtype=float),
-        H=np.asarray(_npz_array(p, arrays, "H", kind), dtype=complex),
-        input_names=_npz_names(p, arrays, "input_names", kind),
-        output_names=_npz_names(p, arrays, "output_names", kind),
-        output_quantities=_npz_names(p, arrays, "output_quantities", kind) if "output_quantities" in arrays else (),
-        coherence=np.asarray(arrays["coherence"], dtype=float) if "coherence" in arrays else None,
-        window_decay=None if np.isnan(decay) else decay,
-    )
+    fields: dict[str, Any] = {
+        "freq": np.asarray(_npz_array(p, arrays, "freq", kind), dtype=float),
+        "H": np.asarray(_npz_array(p, arrays, "H", kind), dtype=complex),
+        "input_names": _npz_names(p, arrays, "input_names", kind),
+        "output_names": _npz_names(p, arrays, "output_names", kind),
+        "output_quantities": _npz_names(p, arrays, "output_quantities", kind) if "output_quantities" in arrays else (),
+        "coherence": np.asarray(arrays["coherence"], dtype=float) if "coherence" in arrays else None,
+        "window_decay": None if np.isnan(decay) else decay,
+    }
     try:
+        frf = FRFData(**fields)
         check_frf(frf)
     except DataError as exc:
         raise _prefixed(p, exc) from exc

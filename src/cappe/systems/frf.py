@@ -2,11 +2,14 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
+
+from cappe.exceptions import DataError
 
 __all__ = ["FRFData"]
 
@@ -37,6 +40,42 @@ class FRFData:
     output_quantities: tuple[str, ...] = ()
     coherence: NDArray[np.float64] | None = None
     window_decay: float | None = None
+
+    def __post_init__(self) -> None:
+        # the structure every consumer relies on; value checks (finite H, increasing lines) belong to the
+        # consumers that need them (writers, modal extraction): a model FRF may be inf at an undamped resonance
+        freq = np.asarray(self.freq, dtype=float)
+        H = np.asarray(self.H)
+        n_out, n_in = len(self.output_names), len(self.input_names)
+        if freq.ndim != 1 or freq.size == 0 or not np.all(np.isfinite(freq)):
+            msg = f"FRF freq must be a non-empty 1-D array of finite frequencies in Hz; got shape {freq.shape}"
+            raise DataError(msg)
+        if H.shape != (n_out, n_in, freq.size):
+            msg = f"FRF H must have shape (n_out, n_in, n_freq) = ({n_out}, {n_in}, {freq.size}); got {H.shape}"
+            raise DataError(msg)
+        for what, names in (("output", self.output_names), ("input", self.input_names)):
+            repeated = sorted({n for n in names if list(names).count(n) > 1})
+            if repeated:
+                msg = f"FRF {what} names must be unique; repeated: {repeated}"
+                raise DataError(msg)
+        if self.output_quantities and len(self.output_quantities) != n_out:
+            msg = (
+                f"FRF output_quantities must list one quantity per output ({n_out}); "
+                f"got {len(self.output_quantities)}"
+            )
+            raise DataError(msg)
+        if self.coherence is not None:
+            coh = np.asarray(self.coherence)
+            if coh.shape != H.shape or np.iscomplexobj(coh) or not np.all(np.isfinite(coh)):
+                msg = f"FRF coherence must be a finite real array of shape {H.shape}; got shape {coh.shape}"
+                raise DataError(msg)
+        decay = self.window_decay
+        if decay is not None and not (
+            isinstance(decay, (int, float, np.floating)) and math.isfinite(decay) and decay > 0
+        ):
+            msg = f"FRF window_decay must be None or a time constant > 0 in s; got {decay!r}"
+            raise DataError(msg)
+        object.__setattr__(self, "freq", freq)
 
     def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
         """The FRF of one output/input pair."""
