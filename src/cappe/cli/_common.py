@@ -42,22 +42,33 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
     add_output_options(parser)
 
 
-def _pairs(items: list[str], what: str) -> dict[str, float]:
-    out: dict[str, float] = {}
+def text_pairs(
+    items: list[str], option: str, form: str = "NAME=VALUE", *, allow_empty: bool = False
+) -> dict[str, str]:
+    """Repeatable ``KEY=VALUE`` options as ``{key: value}`` (stripped); ``form`` shapes the usage message."""
+    out: dict[str, str] = {}
     for item in items:
         name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            msg = f"{what} must look like NAME=VALUE; got {item!r}"
+        if not sep or not name.strip() or not (allow_empty or value.strip()):
+            msg = f"{option} must look like {form}; got {item!r}"
             raise UsageError(msg)
+        out[name.strip()] = value.strip()
+    return out
+
+
+def number_pairs(items: list[str], what: str) -> dict[str, float]:
+    """Repeatable ``NAME=NUMBER`` options as ``{name: finite float}``."""
+    out: dict[str, float] = {}
+    for name, value in text_pairs(items, what, allow_empty=True).items():
         try:
             number = float(value)
         except ValueError as exc:
-            msg = f"{what} {name.strip()!r} must be a number; got {value!r}"
+            msg = f"{what} {name!r} must be a number; got {value!r}"
             raise UsageError(msg) from exc
         if not math.isfinite(number):
-            msg = f"{what} {name.strip()!r} must be finite; got {value!r}"
+            msg = f"{what} {name!r} must be finite; got {value!r}"
             raise UsageError(msg)
-        out[name.strip()] = number
+        out[name] = number
     return out
 
 
@@ -69,10 +80,10 @@ class ModelContext:
         values: dict[str, float] = {}
         if args.params:
             values.update(read_parameters(args.params))
-        values.update(_pairs(args.overrides, "--set"))
+        values.update(number_pairs(args.overrides, "--set"))
         self.values = self.structure.resolve_parameters(values)
         self.overrides = values
-        self.position = self.structure.resolve_position(_pairs(args.position, "--position"))
+        self.position = self.structure.resolve_position(number_pairs(args.position, "--position"))
         self._numeric: NumericModel | None = None
 
     @property

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, text_pairs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -49,32 +49,24 @@ def load_data(path: str) -> Any:
 
 def _bounds(items: list[str]) -> dict[str, tuple[float, float]]:
     out: dict[str, tuple[float, float]] = {}
-    for item in items:
-        name, sep, rest = item.partition("=")
-        lo, sep2, hi = rest.partition(":")
+    for name, rest in text_pairs(items, "--bounds", "NAME=LO:HI").items():
+        lo, _, hi = rest.partition(":")
         try:
-            pair = (float(lo), float(hi))
-        except ValueError:
-            pair = None
-        if not sep or not sep2 or not name.strip() or pair is None:
-            msg = f"--bounds must look like NAME=LO:HI; got {item!r}"
-            raise UsageError(msg)
-        out[name.strip()] = pair
+            out[name] = (float(lo), float(hi))  # a missing ':' leaves hi empty, which float() rejects
+        except ValueError as exc:
+            msg = f"--bounds must look like NAME=LO:HI; got {name + '=' + rest!r}"
+            raise UsageError(msg) from exc
     return out
 
 
 def settings(items: list[str]) -> dict[str, Any]:
     """``NAME=VALUE`` pairs; VALUE parsed as JSON when it is JSON, else kept as a string."""
     out: dict[str, Any] = {}
-    for item in items:
-        name, sep, value = item.partition("=")
-        if not sep or not name.strip():
-            msg = f"--setting must look like NAME=VALUE; got {item!r}"
-            raise UsageError(msg)
+    for name, value in text_pairs(items, "--setting", allow_empty=True).items():
         try:
-            out[name.strip()] = json.loads(value)
+            out[name] = json.loads(value)
         except json.JSONDecodeError:
-            out[name.strip()] = value
+            out[name] = value
     return out
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from cappe.cli._common import UsageError, add_output_options, band, emit, names
+from cappe.cli._common import UsageError, add_output_options, band, emit, names, text_pairs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,23 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run)
 
 
-def _pairs(items: list[str], option: str, form: str) -> dict[str, str]:
-    out: dict[str, str] = {}
-    for item in items:
-        key, sep, value = item.partition("=")
-        if not sep or not key.strip() or not value.strip():
-            msg = f"{option} must look like {form}; got {item!r}"
-            raise UsageError(msg)
-        out[key.strip()] = value.strip()
-    return out
-
-
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import extract_modes
     from cappe.io import read_frf, write_modal_data, write_uff_modal
 
     frf = read_frf(args.frf)
-    labels = _pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
+    labels = text_pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
     unknown = sorted(set(labels) - set(frf.output_names))
     if unknown:
         msg = f"--sensor names outputs {unknown} that {args.frf} lacks; its outputs are {list(frf.output_names)}"
@@ -64,7 +53,7 @@ def run(args: argparse.Namespace) -> int:
     except ValueError as exc:
         msg = f"--near must be a comma-separated list of frequencies in Hz; got {args.near!r}"
         raise UsageError(msg) from exc
-    pairs = _pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
+    pairs = text_pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
     driving = {inp: labels.get(out, out) for inp, out in pairs.items()}
     result = extract_modes(
         frf, band=lo_hi, max_order=args.max_order, n_modes=args.n_modes, method=args.method,

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import UsageError, _pairs, emit, names
+from cappe.cli._common import UsageError, emit, names, number_pairs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -66,7 +66,7 @@ def _position(value: str | None, reference: Any) -> dict[str, float] | None:
         return dict(reference.sets[0].position) if len(reference.sets) >= 2 else None
     if value.strip().lower() == "none":
         return None
-    return _pairs([v for v in value.split(",") if v.strip()], "--validation")
+    return number_pairs([v for v in value.split(",") if v.strip()], "--validation")
 
 
 def _noise(value: str | None) -> tuple[float, float, float] | None:
@@ -99,7 +99,7 @@ def run(args: argparse.Namespace) -> int:
     values: dict[str, float] = {}
     if args.params:
         values.update(read_parameters(args.params))
-    values.update(_pairs(args.overrides, "--set"))
+    values.update(number_pairs(args.overrides, "--set"))
     structure.resolve_parameters(values)  # unknown names are an error here
     truth = read_parameters(args.truth) if args.truth else None
     if truth is not None:
