@@ -21,12 +21,12 @@ CARRIAGE = """\
 format: cappe.model/1
 name: carriage
 parameters:
-  - {name: mb, value: 20.0, kind: mass}
-  - {name: mt, value: 5.0, kind: mass}
+  - {name: mb, value: 20.0, kind: mass, disturbable: true}
+  - {name: mt, value: 5.0, kind: mass, disturbable: true}
   - {name: kb, value: 4.0e6, kind: stiffness}
   - {name: kt, value: 2.0e6, kind: stiffness}
   - {name: cb, value: 200.0, kind: damping}
-  - {name: ct, value: 40.0, kind: damping}
+  - {name: ct, value: 40.0, kind: damping, disturbable: true}
 axes:
   - {name: z, positions: [-0.2, 0.0, 0.3]}
 bodies:
@@ -180,6 +180,8 @@ def test_frf_band_defaults_and_model_outputs(capsys, files, tmp_path):
         (["--noise", "0.01"], 2, "--noise belongs to time simulation (--excite INPUT=SIGNAL)"),
         (["--fs", "100", "--duration", "2"], 2, "--fs, --duration belong to time simulation"),
         (["--excite", "F=random", "--modes", "3"], 2, "--modes belongs to reference modal data (without --excite)"),
+        (["--disturb", "1.5"], 2, "--disturb must be a fraction in [0, 1), e.g. 0.1; got 1.5"),
+        (["--disturb", "nan"], 2, "--disturb must be a fraction in [0, 1)"),
     ],
 )
 def test_errors(capsys, files, tmp_path, argv, code, message):
@@ -211,3 +213,27 @@ def test_model_without_axes_and_builtin(capsys, tmp_path):
     code, _, err = run(capsys, "simulate", "builtin:two-mass-rig", "--positions", "z=0")
     assert code == 2
     assert "model 'two-mass-rig' has no axis 'z'; its axes: none (this model has no axes)" in err
+
+
+def test_disturbed_model(capsys, files, model, tmp_path):
+    # paper 3.3: every disturbable parameter (mb, mt, ct here) off by +-10 %, except those given explicitly
+    ref_file = tmp_path / "ref.json"
+    code, out, err = simulate(capsys, files, "--disturb", 0.1, "--set", "mt=6", "--seed", 3, "--modes", 3,
+                              "-o", ref_file, "--json")
+    assert code == 0, err
+    params = json.loads(out)["parameters"]
+    assert params["kt"] == TRUTH["kt"]  # not disturbable: as given
+    assert params["mt"] == 6.0  # given explicitly: not disturbed
+    assert params["mb"] in (pytest.approx(18.0, rel=1e-15), pytest.approx(22.0, rel=1e-15))
+    assert params["ct"] in (pytest.approx(36.0, rel=1e-15), pytest.approx(44.0, rel=1e-15))
+    assert read_modal_data(ref_file).to_dict() == reference_modes(model, params=params, n_modes=3, rng=3).to_dict()
+    # the signs come from the seed: some seed among a few flips mb
+    signs = set()
+    for seed in range(6):
+        code, out, _ = simulate(capsys, files, "--disturb", 0.1, "--seed", seed, "--json")
+        assert code == 0
+        signs.add(json.loads(out)["parameters"]["mb"] > 20.0)
+    assert signs == {True, False}
+    code, _, err = run(capsys, "simulate", "builtin:two-mass-rig", "--disturb", "0.1")
+    assert code == 2
+    assert "model 'two-mass-rig' tags no parameter as disturbable" in err

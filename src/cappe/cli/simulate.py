@@ -64,6 +64,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="Hz; time data: excitation band of random and chirp signals (default 0:fs/2.56); "
                         "reference data: FRF band (default 0 to 1.25 x the highest mode)")
     p.add_argument("--seed", type=int, default=0, help="seed for the signals and the noise (default 0)")
+    p.add_argument("--disturb", type=float, metavar="FRACTION",
+                   help="disturbed model (paper 3.3): every disturbable parameter not given by --params or --set "
+                        "times 1 +- FRACTION, random signs from --seed (e.g. 0.1)")
     modal = p.add_argument_group("reference modal data (without --excite)")
     modal.add_argument("--positions", metavar="all|AXIS=V[,V...]", action="append", default=[],
                        help="axis positions: 'all' (every listed position of the model's axes) or values of one "
@@ -155,7 +158,7 @@ def _run_time(args: argparse.Namespace) -> int:
     from cappe.io import TimeData, write_time_data
     from cappe.systems import time_response
 
-    ctx = ModelContext(args)
+    ctx = _context(args)
     system = ctx.system()
     lo_hi = band(args.band) if args.band else (0.0, args.fs / 2.56)
     # independent random streams for every signal and for the noise (one seed must not correlate them)
@@ -194,6 +197,24 @@ def _run_time(args: argparse.Namespace) -> int:
         lines.append(f"wrote {args.out}")
     emit(argparse.Namespace(**{**vars(args), "out": None}), summary, "\n".join(lines))
     return 0
+
+
+def _context(args: argparse.Namespace) -> ModelContext:
+    """The model and its values, with --disturb applied to the disturbable parameters not set explicitly."""
+    ctx = ModelContext(args)
+    if args.disturb is not None:
+        if not (np.isfinite(args.disturb) and 0 <= args.disturb < 1):
+            msg = f"--disturb must be a fraction in [0, 1), e.g. 0.1; got {args.disturb}"
+            raise UsageError(msg)
+        # a stream of its own, so that adding --disturb leaves the noise of the same seed unchanged
+        changed = ctx.structure.disturbed(args.disturb, np.random.default_rng([args.seed, 3]), ctx.values)
+        if not changed:
+            msg = f"--disturb: model '{ctx.structure.name}' tags no parameter as disturbable"
+            raise UsageError(msg)
+        changed = {n: v for n, v in changed.items() if n not in ctx.overrides}
+        ctx.values.update(changed)
+        ctx.overrides.update(changed)
+    return ctx
 
 
 def _parse_positions(items: list[str], ctx: ModelContext) -> list[dict[str, float]] | str:
@@ -262,7 +283,7 @@ def _run_modal(args: argparse.Namespace) -> int:
     if args.lines is not None and args.lines < 2:
         msg = f"--lines must be an integer >= 2; got {args.lines}"
         raise UsageError(msg)
-    ctx = ModelContext(args)
+    ctx = _context(args)
     model = ctx.numeric
     positions = _parse_positions(args.positions, ctx)
     levels = {key: getattr(args, f"noise_{key}") or 0.0 for key in ("frequency", "damping", "shape")}
@@ -291,6 +312,9 @@ def _run_modal(args: argparse.Namespace) -> int:
         f"noise: frequency {levels['frequency']:g}, damping {levels['damping']:g}, shape {levels['shape']:g} "
         f"(relative std; seed {args.seed})"
     )
+    if args.disturb:
+        n = sum(p.disturbable for p in ctx.structure.parameters)
+        lines.append(f"disturbed: the {n} disturbable parameters by +-{args.disturb:g} (their values: --json)")
     if args.out:
         write_modal_data(args.out, ref)
         files["modal"] = args.out

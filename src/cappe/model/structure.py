@@ -276,6 +276,27 @@ class Structure:
             out[name] = number
         return out
 
+    def disturbed(self, fraction: float, rng: np.random.Generator, values: Mapping[str, float] | None = None,
+                  ) -> dict[str, float]:
+        """Every ``disturbable`` parameter times ``1 + fraction`` or ``1 - fraction`` (random signs from ``rng``).
+
+        The disturbed model of paper 3.3: known parameters deliberately wrong by a fixed relative amount.
+        Values are taken from ``values`` where given, else nominal; the result holds the disturbable ones only.
+
+        >>> from cappe.model import load_model
+        >>> s = load_model("builtin:uniaxial-machine-tool")
+        >>> d = s.disturbed(0.1, np.random.default_rng(0))
+        >>> len(d), sorted({round(float(v / s.nominal[n]), 6) for n, v in d.items()})
+        (40, [0.9, 1.1])
+        """
+        if not (math.isfinite(fraction) and 0 <= fraction < 1):
+            msg = f"disturbance fraction must be in [0, 1); got {fraction!r}"
+            raise ModelError(msg)
+        base = self.resolve_parameters(values)
+        names = [p.name for p in self.parameters if p.disturbable]
+        signs = rng.choice([-1.0, 1.0], size=len(names))
+        return {n: base[n] * (1 + fraction * s) for n, s in zip(names, signs, strict=True)}
+
     def resolve_position(self, position: Mapping[str, float] | None = None) -> dict[str, float]:
         """Default axis position overridden by ``position``; unknown axes are errors."""
         out = self.default_position()
