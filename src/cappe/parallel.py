@@ -1,27 +1,40 @@
-"""Executors for the hot path: chunks of samples on local threads, BLAS pinned to one thread.
+"""Executors for the hot path: chunks of samples on threads, local processes or a Dask cluster.
 
 numpy's batched LAPACK calls (``eigh``, ``cholesky``, ``inv``, stacked ``matmul``) release the GIL, so
 threads over chunks of samples scale with the cores, while OpenBLAS's own threading gains little on small
 matrices and can collapse when numpy and scipy calls interleave. Inside :func:`map_chunks` BLAS therefore
 runs single-threaded and the parallelism is over samples. Every chunk computes each sample the same way,
-so results do not depend on the chunk size or the number of workers.
+so results do not depend on the chunk size, the number of workers or where the chunks run.
+
+:class:`Executor` is the one place that decides where work runs:
+
+- ``"serial"``: in the calling thread;
+- ``"threads"``: a thread pool (the default; right where the work is batched numpy);
+- ``"processes"``: local worker processes (right where pure-Python work holds the GIL); the function is
+  shipped once per map with cloudpickle, so closures work;
+- ``"tcp://HOST:PORT"`` (or any address ``dask.distributed.Client`` accepts): an existing Dask cluster; the
+  function is scattered once to every worker, chunks run as tasks. ``dask-jobqueue`` (HPC batch systems) and
+  ``dask-kubernetes`` clusters expose such an address too.
 """
 
 from __future__ import annotations
 
 import os
-from collections.abc import Callable, Iterator
-from concurrent.futures import ThreadPoolExecutor
+import threading
+from collections.abc import Callable, Iterator, Sequence
+from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["chunk_slices", "map_chunks", "resolve_workers", "single_threaded_blas"]
+__all__ = ["Executor", "chunk_slices", "map_chunks", "resolve_workers", "single_threaded_blas"]
 
 T = TypeVar("T")
 
-_CONTROLLER: ThreadpoolController | None = None
+_LIMITER: Any = None
+_USERS = 0
+_PIN_LOCK = threading.Lock()
 
 
 def resolve_workers(n_workers: int | None) -> int:
@@ -59,12 +72,172 @@ def chunk_slices(n: int, chunk_size: int) -> list[slice]:
 
 @contextmanager
 def single_threaded_blas() -> Iterator[None]:
-    """Limit the BLAS libraries loaded in this process to one thread inside the block."""
-    global _CONTROLLER
-    if _CONTROLLER is None:
-        _CONTROLLER = ThreadpoolController()
-    with _CONTROLLER.limit(limits=1, user_api="blas"):
+    """Limit the BLAS libraries loaded in this process to one thread inside the block.
+
+    The limit is process-wide, so the block counts its users: threads may enter and leave it in any order,
+    and the original limits come back when the last one leaves.
+    """
+    global _LIMITER, _USERS
+    with _PIN_LOCK:
+        if _USERS == 0:
+            # a fresh scan: a BLAS loaded since the last one (scipy's own OpenBLAS, say) is limited too
+            _LIMITER = ThreadpoolController().limit(limits=1, user_api="blas")
+        _USERS += 1
+    try:
         yield
+    finally:
+        with _PIN_LOCK:
+            _USERS -= 1
+            if _USERS == 0 and _LIMITER is not None:
+                _LIMITER.restore_original_limits()
+                _LIMITER = None
+
+
+class Executor:
+    """Where :func:`map_chunks` runs its chunks (see the module): serial, threads, processes or Dask.
+
+    Parameters
+    ----------
+    kind : str
+        ``"serial"``, ``"threads"``, ``"processes"`` or a Dask scheduler address (``"tcp://127.0.0.1:8786"``).
+    n_workers : int or None
+        Threads or processes (``None``: one per core); ignored for Dask, whose cluster has its own workers.
+
+    An executor holds no resources between maps except a Dask client, which :meth:`close` (or leaving a
+    ``with`` block) releases.
+
+    Examples
+    --------
+    >>> with Executor("processes", n_workers=2) as ex:
+    ...     ex.map(lambda s: list(range(s.start, s.stop)), [slice(0, 2), slice(2, 3)])
+    [[0, 1], [2]]
+    """
+
+    LOCAL = ("serial", "threads", "processes")
+
+    def __init__(self, kind: str = "threads", n_workers: int | None = None) -> None:
+        if not isinstance(kind, str) or not (kind in self.LOCAL or "://" in kind):
+            msg = (f"executor must be 'serial', 'threads', 'processes' or a Dask scheduler address like "
+                   f"'tcp://HOST:PORT'; got {kind!r}")
+            raise ValueError(msg)
+        self.kind = kind
+        self.n_workers = 1 if kind == "serial" else resolve_workers(n_workers)
+        self._client: Any = None
+
+    @classmethod
+    def coerce(cls, executor: Executor | str | None, n_workers: int | None = None) -> Executor:
+        """An :class:`Executor` from an executor, a kind / address, or ``None`` (threads)."""
+        if isinstance(executor, Executor):
+            return executor
+        return cls("threads" if executor is None else executor, n_workers)
+
+    def __repr__(self) -> str:
+        return f"Executor({self.kind!r}, n_workers={self.n_workers})"
+
+    def __getstate__(self) -> dict[str, Any]:
+        # shipped along with the objects that hold it (a modal engine, say): the client stays here
+        return {**self.__dict__, "_client": None}
+
+    def __enter__(self) -> Executor:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    def close(self) -> None:
+        """Release the Dask client, if one was opened."""
+        if self._client is not None:
+            self._client.close()
+            self._client = None
+
+    @property
+    def client(self) -> Any:
+        """The ``dask.distributed.Client`` of a scheduler address (opened on first use)."""
+        if self.kind in self.LOCAL:
+            msg = f"executor {self.kind!r} has no Dask client"
+            raise ValueError(msg)
+        if self._client is None:
+            from distributed import Client
+
+            self._client = Client(self.kind, set_as_default=False)  # type: ignore[no-untyped-call]
+        return self._client
+
+    def map(self, func: Callable[[Any], T], items: Sequence[Any],
+            done: Callable[[Any], None] | None = None) -> list[T]:
+        """``[func(item) for item in items]`` on this executor, in order; ``done(item)`` after each item."""
+        items = list(items)
+
+        def call_here(item: Any) -> T:
+            value = func(item)
+            if done is not None:
+                done(item)
+            return value
+
+        workers = min(self.n_workers, max(len(items), 1))
+        if self.kind in ("serial", "threads"):
+            with single_threaded_blas():
+                if workers == 1:
+                    return [call_here(item) for item in items]
+                with ThreadPoolExecutor(max_workers=workers) as pool:
+                    return list(pool.map(call_here, items))
+        call = _Pinned(func)  # one BLAS thread in each worker process (and Dask worker thread)
+        if self.kind == "processes":
+            import multiprocessing
+
+            import cloudpickle
+
+            payload = cloudpickle.dumps(call)
+            method = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+            with ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method),
+                                     initializer=_install, initargs=(payload,)) as processes:
+                local = {processes.submit(_run_installed, item): k for k, item in enumerate(items)}
+                return _collect(as_completed(local), local, items, done)
+        client = self.client
+        remote = client.scatter(call, broadcast=True)
+        tasks = client.map(_run_scattered, items, function=remote, pure=False)
+        return _collect(tasks, {f: k for k, f in enumerate(tasks)}, items, done)  # waits in item order
+
+
+class _Pinned:
+    """A callable that runs ``func`` with BLAS on one thread (in whatever process it lands)."""
+
+    def __init__(self, func: Callable[[Any], Any]) -> None:
+        self.func = func
+
+    def __call__(self, item: Any) -> Any:
+        with single_threaded_blas():
+            return self.func(item)
+
+
+_INSTALLED: Callable[[Any], Any] | None = None
+
+
+def _install(payload: bytes) -> None:
+    """Process-pool initializer: unpickle the mapped function once per worker process."""
+    import pickle
+
+    global _INSTALLED
+    _INSTALLED = pickle.loads(payload)  # noqa: S301 - our own cloudpickle payload
+
+
+def _run_installed(item: Any) -> Any:
+    assert _INSTALLED is not None  # set by _install
+    return _INSTALLED(item)
+
+
+def _run_scattered(item: Any, function: Callable[[Any], Any]) -> Any:
+    return function(item)
+
+
+def _collect(finished: Any, index: dict[Any, int], items: list[Any], done: Callable[[Any], None] | None) -> list[Any]:
+    """Results of ``finished`` futures (in completion order) put back in item order."""
+    out: list[Any] = [None] * len(items)
+    for future in finished:
+        k = index[future]
+        out[k] = future.result()
+        if done is not None:
+            done(items[k])
+    return out
 
 
 def map_chunks(
@@ -73,10 +246,11 @@ def map_chunks(
     *,
     chunk_size: int,
     n_workers: int | None = None,
+    executor: Executor | str | None = None,
     progress: bool = False,
     description: str = "",
 ) -> list[T]:
-    """Apply ``func`` to consecutive chunks of ``range(n)`` on threads; results in chunk order.
+    """Apply ``func`` to consecutive chunks of ``range(n)``; results in chunk order.
 
     Parameters
     ----------
@@ -87,7 +261,9 @@ def map_chunks(
     chunk_size : int
         Samples per chunk; bounds the memory of one call.
     n_workers : int or None
-        Threads (``None``: one per core).
+        Threads (``None``: one per core) when no ``executor`` is given.
+    executor : Executor, str or None
+        Where the chunks run (see :class:`Executor`; default threads).
     progress : bool
         Show a progress bar (tqdm) over samples.
     description : str
@@ -97,27 +273,20 @@ def map_chunks(
     --------
     >>> map_chunks(lambda s: s.stop - s.start, 10, chunk_size=4, n_workers=2)
     [4, 4, 2]
+    >>> map_chunks(lambda s: s.stop - s.start, 10, chunk_size=4, executor="serial")
+    [4, 4, 2]
     """
     slices = chunk_slices(n, chunk_size)
-    workers = min(resolve_workers(n_workers), max(len(slices), 1))
+    runner = Executor.coerce(executor, n_workers)
     bar: Any = None
     if progress:
         from tqdm.auto import tqdm
 
         bar = tqdm(total=n, desc=description or None, unit="sample")
-
-    def run(s: slice) -> T:
-        out = func(s)
-        if bar is not None:
-            bar.update(s.stop - s.start)
-        return out
-
     try:
-        with single_threaded_blas():
-            if workers == 1:
-                return [run(s) for s in slices]
-            with ThreadPoolExecutor(max_workers=workers) as pool:
-                return list(pool.map(run, slices))
+        return runner.map(func, slices, done=None if bar is None else (lambda s: bar.update(s.stop - s.start)))
     finally:
         if bar is not None:
             bar.close()
+        if runner is not executor:
+            runner.close()

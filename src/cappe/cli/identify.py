@@ -53,7 +53,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="sensor channels of the FRF shown in the report, e.g. table:x,table:x (default: the driving "
                         "point with the largest peak)")
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
-    p.add_argument("--workers", type=int, help="threads (default: one per core)")
+    p.add_argument("--workers", type=int, help="threads or processes (default: one per core)")
+    p.add_argument("--executor", choices=("serial", "threads", "processes"), default="threads",
+                   help="where the GSA and the subproblems run (default threads; the result is the same)")
+    p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
+                   help="run the GSA and the subproblems on an existing Dask cluster (overrides --executor)")
     p.add_argument("--progress", action="store_true", help="progress bars even when stderr is not a terminal")
     p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
@@ -92,6 +96,9 @@ def run(args: argparse.Namespace) -> int:
         if value < low:
             msg = f"{option} must be >= {low}; got {value}"
             raise UsageError(msg)
+    if args.scheduler is not None and "://" not in args.scheduler:
+        msg = f"--scheduler must be a Dask scheduler address like tcp://HOST:PORT; got {args.scheduler!r}"
+        raise UsageError(msg)
     if args.workers is not None and args.workers < 1:
         msg = f"--workers must be >= 1; got {args.workers}"
         raise UsageError(msg)
@@ -118,7 +125,7 @@ def run(args: argparse.Namespace) -> int:
         NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
         n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
         n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args.noise),
-        overlay=overlay, n_workers=args.workers, progress=progress,
+        overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, progress=progress,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

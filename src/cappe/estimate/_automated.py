@@ -71,7 +71,7 @@ from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
-from cappe.parallel import map_chunks
+from cappe.parallel import Executor, chunk_slices
 
 __all__ = [
     "DAMPING_KINDS",
@@ -611,6 +611,10 @@ class AutomatedIdentification(Estimator):
         Output and input channel of the FRF kept for overlays (default: the driving point with the largest peak).
     n_workers : int, optional
         Threads for the GSA and the subproblems (default one per core).
+    executor : Executor, str or None
+        Where the GSA's model evaluations and the subproblems run instead: ``"serial"``, ``"threads"``,
+        ``"processes"`` or a Dask scheduler address (see :class:`cappe.parallel.Executor`). The result is the
+        same for every choice.
     progress : bool
         Progress bars (tqdm, stderr) per stage.
 
@@ -668,6 +672,7 @@ class AutomatedIdentification(Estimator):
         noise: Sequence[float] | None = None,
         overlay: tuple[str, str] | None = None,
         n_workers: int | None = None,
+        executor: Executor | str | None = None,
         progress: bool = False,
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
@@ -687,6 +692,7 @@ class AutomatedIdentification(Estimator):
         self.noise = noise
         self.overlay = overlay
         self.n_workers = n_workers
+        self.executor = executor
         self.progress = progress
 
     # -- checks -------------------------------------------------------------------------------------------------
@@ -775,6 +781,16 @@ class AutomatedIdentification(Estimator):
     # -- the pipeline -------------------------------------------------------------------------------------------
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
              rng: np.random.Generator) -> ParameterEstimate:
+        runner = Executor.coerce(self.executor, self.n_workers)
+        try:
+            return self._stages(model, space, data, rng, runner)
+        finally:
+            if runner is not self.executor:  # made here (e.g. a Dask client from an address): release it
+                runner.close()
+
+    def _stages(self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator,
+                runner: Executor) -> ParameterEstimate:
+        """GSA, stiffness subproblems and refinement, damping, joint refinement and validation (see the class)."""
         from tqdm.auto import tqdm
 
         from cappe.sensitivity import model_sobol
@@ -802,6 +818,7 @@ class AutomatedIdentification(Estimator):
         t = time.perf_counter()
         gsa = model_sobol(gsa_model, ident_ref, parameters=list(space.names), bounds=bounds_arr, n=int(self.n_gsa),
                           rng=int(seeds[0]), criteria=tuple(self.criteria), n_workers=self.n_workers,
+                          executor=runner,
                           progress=self.progress)
         timings["gsa"] = time.perf_counter() - t
         st = gsa.sobol.ST
@@ -847,11 +864,11 @@ class AutomatedIdentification(Estimator):
                 position = structure.resolve_position(ident_ref.sets[j].position)
                 results.append(SubproblemResult(r + 1, dict(position), search, values, cost, iters,
                                                 time.perf_counter() - t0, space.lower[idx], space.upper[idx]))
-                bar.update(1)
             return results
 
         try:
-            parts = map_chunks(run, len(jobs), chunk_size=1, n_workers=self.n_workers) if jobs else []
+            parts = runner.map(
+                run, chunk_slices(len(jobs), 1), done=lambda s: bar.update(s.stop - s.start))
         finally:
             bar.close()
         subproblems = [sub for part in parts for sub in part]

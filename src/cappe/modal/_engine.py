@@ -22,7 +22,7 @@ from cappe.io.modal import ModalData
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import DampingSources, NumericModel, ParamsLike
 from cappe.model.structure import Structure
-from cappe.parallel import map_chunks
+from cappe.parallel import Executor, map_chunks
 
 if TYPE_CHECKING:
     from cappe.modal._derivatives import ModalDerivatives
@@ -91,6 +91,9 @@ class ModalEngine:
         Samples per chunk; bounds memory (about ``chunk_size * 6 * n_dof**2`` floats in flight per worker).
     n_workers : int or None
         Worker threads; ``None``: one per core. Results are identical for any value.
+    executor : Executor, str or None
+        Where chunks run instead (``"serial"``, ``"threads"``, ``"processes"`` or a Dask scheduler address; see
+        :class:`cappe.parallel.Executor`); results are identical for every choice.
 
     Examples
     --------
@@ -109,6 +112,7 @@ class ModalEngine:
         n_modes: int | None = None,
         chunk_size: int = 256,
         n_workers: int | None = None,
+        executor: Executor | str | None = None,
     ) -> None:
         self.model = model if isinstance(model, NumericModel) else NumericModel(model)
         n = self.model.n_dof
@@ -120,6 +124,7 @@ class ModalEngine:
         self.n_modes = n_modes
         self.chunk_size = chunk_size
         self.n_workers = n_workers
+        self.executor = executor
         self._sensor_request = sensors
         self._sensor_cache: dict[tuple[float, ...], tuple[tuple[str, ...], Array]] = {}
         self._group_cache: dict[tuple[float, ...], list[NDArray[np.intp]]] = {}
@@ -288,6 +293,7 @@ class ModalEngine:
             pb.shape[0],
             chunk_size=self.chunk_size,
             n_workers=self.n_workers,
+            executor=self.executor,
             progress=progress,
             description="modes",
         )
@@ -315,7 +321,7 @@ class ModalEngine:
             return func(self._combine([chunk], pb[s], position))
 
         return map_chunks(run, pb.shape[0], chunk_size=self.chunk_size, n_workers=self.n_workers,
-                          progress=progress, description="modes")
+                          executor=self.executor, progress=progress, description="modes")
 
     def _combine(self, chunks: list[_Chunk], pb: Array, position: Mapping[str, float] | None) -> ModalBatch:
         sensors = self._sensor_rows(position)[0]

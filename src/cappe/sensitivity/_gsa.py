@@ -25,6 +25,7 @@ from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalBatch, ModalEngine
 from cappe.model.numeric import NumericModel
 from cappe.model.structure import Structure
+from cappe.parallel import Executor
 from cappe.sensitivity._sobol import SobolResult, sobol_indices
 
 __all__ = ["CRITERIA", "ModelSobolResult", "model_sobol"]
@@ -142,6 +143,7 @@ def model_sobol(
     n_workers: int | None = None,
     chunk_size: int = 256,
     n_resamples: int = 100,
+    executor: Executor | str | None = None,
     progress: bool = False,
 ) -> ModelSobolResult:
     """Sobol indices of MACXP, NDD^2, frequency and damping for every reference mode at every position.
@@ -168,6 +170,8 @@ def model_sobol(
         Parallelism and memory bound of the modal engine.
     n_resamples : int
         Bootstrap resamples for the confidence intervals.
+    executor : Executor, str or None
+        Where the model evaluations run (see :class:`cappe.parallel.Executor`; default threads).
     progress : bool
         Progress bar.
 
@@ -207,7 +211,8 @@ def model_sobol(
             if np.any(data_set.damping <= 0):
                 msg = f"reference set {k} has a zero damping ratio; NDD^2 divides by the reference damping"
                 raise DataError(msg)
-    engine = ModalEngine(nm, sensors=list(reference.sensors), chunk_size=chunk_size, n_workers=n_workers)
+    engine = ModalEngine(nm, sensors=list(reference.sensors), chunk_size=chunk_size, n_workers=n_workers,
+                         executor=executor)
     positions = [structure.resolve_position(s.position) for s in reference.sets]
     columns = [nm.parameter_names.index(name) for name in names]
 

@@ -1,0 +1,166 @@
+"""Executors (cappe.parallel): serial, threads, local processes and a real Dask cluster give identical results.
+
+The Dask test starts a ``dask scheduler`` and two ``dask worker`` processes on loopback (the installed console
+scripts), runs the modal engine and a small automated identification there, and compares with the serial run
+for the same seed: every number must be equal, not close.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from threadpoolctl import threadpool_info
+
+from cappe.estimate._automated import AutomatedIdentification
+from cappe.modal import ModalEngine
+from cappe.model import NumericModel, load_model
+from cappe.parallel import Executor, map_chunks, single_threaded_blas
+
+BENCH = Path(__file__).parent / "data" / "bench-slide.yaml"
+POSITIONS = [{"z": -0.2}, {"z": 0.0}, {"z": 0.3}]
+
+
+def _square_chunk(offset: float):
+    # a closure: processes and Dask must ship it by value
+    def work(s: slice) -> list[float]:
+        return [offset + k * k for k in range(s.start, s.stop)]
+
+    return work
+
+
+@pytest.mark.parametrize("kind", ["serial", "threads", "processes"])
+def test_local_executors_keep_order_and_report_each_chunk(kind):
+    seen = []
+    with Executor(kind, n_workers=2) as ex:
+        out = ex.map(_square_chunk(0.5), [slice(0, 3), slice(3, 4), slice(4, 7)], done=seen.append)
+    assert out == [[0.5, 1.5, 4.5], [9.5], [16.5, 25.5, 36.5]]
+    assert sorted(s.start for s in seen) == [0, 3, 4]
+
+
+def test_map_chunks_results_do_not_depend_on_the_executor():
+    expected = [float(k * k) for k in range(11)]
+    for executor in ("serial", "threads", "processes"):
+        parts = map_chunks(_square_chunk(0.0), 11, chunk_size=4, executor=executor, n_workers=2)
+        assert [v for part in parts for v in part] == expected
+
+
+def test_executor_errors():
+    with pytest.raises(ValueError, match="executor must be 'serial', 'threads', 'processes' or a Dask scheduler"):
+        Executor("gpu")
+    with pytest.raises(ValueError, match="n_workers must be a positive integer"):
+        Executor("threads", n_workers=0)
+    with pytest.raises(ValueError, match="has no Dask client"):
+        _ = Executor("threads").client
+    # an exception in a worker process reaches the caller
+    with pytest.raises(ZeroDivisionError), Executor("processes", n_workers=2) as ex:
+        ex.map(lambda s: 1 / 0, [slice(0, 1), slice(1, 2)])
+
+
+def _blas_threads() -> list[int]:
+    return [lib["num_threads"] for lib in threadpool_info() if lib["user_api"] == "blas"]
+
+
+def test_blas_limit_is_restored_after_overlapping_threads():
+    # the limit is process-wide: a thread that enters and leaves while another still works must not lift it
+    # (read here, in the thread that entered first)
+    before = _blas_threads()
+    with single_threaded_blas():
+        assert all(n == 1 for n in _blas_threads())
+        with single_threaded_blas():  # nested in the same thread
+            pass
+        inner = threading.Thread(target=_enter_and_leave)
+        inner.start()
+        inner.join()
+        assert all(n == 1 for n in _blas_threads())
+    assert _blas_threads() == before
+
+
+def _enter_and_leave() -> None:
+    with single_threaded_blas():
+        pass
+
+
+@pytest.fixture(scope="module")
+def bench() -> NumericModel:
+    return NumericModel(load_model(BENCH))
+
+
+def _identify(bench: NumericModel, reference, executor) -> AutomatedIdentification:
+    return AutomatedIdentification(bench, n_gsa=16, n_opt=3, rng=5, validation={"z": -0.2}, n_permutations=0,
+                                   n_workers=2, executor=executor).fit(reference)
+
+
+def _same(a: AutomatedIdentification, b: AutomatedIdentification) -> None:
+    np.testing.assert_array_equal(a.estimate_.values, b.estimate_.values)
+    np.testing.assert_array_equal(a.gsa_.sobol.ST, b.gsa_.sobol.ST)
+    for sa, sb in zip(a.subproblems_, b.subproblems_, strict=True):
+        np.testing.assert_array_equal(sa.values, sb.values)
+
+
+@pytest.fixture(scope="module")
+def reference(bench):
+    truth = {"me_kx": 7.1e7, "lgs_ky": 3.4e8, "me_by": 1.1e4}
+    return ModalEngine(bench).modal_data(POSITIONS, params=truth)
+
+
+@pytest.fixture(scope="module")
+def serial_run(bench, reference):
+    return _identify(bench, reference, "serial")
+
+
+def test_identification_in_processes_equals_serial(bench, reference, serial_run):
+    _same(_identify(bench, reference, "processes"), serial_run)
+
+
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
+    """A scheduler and two single-threaded workers on loopback, as a user would start them."""
+    folder = tmp_path_factory.mktemp("dask")
+    scheduler_file = folder / "scheduler.json"
+    bindir = Path(sys.executable).parent
+    env = {**os.environ, "DASK_DISTRIBUTED__WORKER__DAEMON": "False"}
+    procs = [subprocess.Popen([str(bindir / "dask"), "scheduler", "--host", "127.0.0.1", "--port", "0",
+                               "--no-dashboard", "--scheduler-file", str(scheduler_file)],
+                              stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=folder)]
+    try:
+        deadline = time.monotonic() + 60
+        while not scheduler_file.exists() and time.monotonic() < deadline:
+            time.sleep(0.1)
+        address = json.loads(scheduler_file.read_text())["address"]
+        for _ in range(2):
+            procs.append(subprocess.Popen([str(bindir / "dask"), "worker", address, "--nthreads", "1",
+                                           "--no-dashboard", "--host", "127.0.0.1"],
+                                          stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, cwd=folder))
+        with Executor(address) as ex:
+            ex.client.wait_for_workers(2, timeout=60)
+        yield address
+    finally:
+        for proc in procs[::-1]:
+            proc.terminate()
+        for proc in procs:
+            proc.wait(timeout=30)
+
+
+@pytest.mark.slow
+def test_dask_cluster_gives_the_serial_results(bench, reference, serial_run, dask_cluster):
+    with Executor(dask_cluster) as ex:
+        seen = []
+        parts = ex.map(_square_chunk(2.0), [slice(0, 2), slice(2, 5)], done=seen.append)
+        assert parts == [[2.0, 3.0], [6.0, 11.0, 18.0]]
+        assert len(seen) == 2
+        # the modal engine's chunks on the cluster: identical to one thread here
+        params = bench.nominal * np.random.default_rng(0).uniform(0.8, 1.2, size=(40, bench.nominal.size))
+        remote = ModalEngine(bench, chunk_size=8, executor=ex).evaluate(params, {"z": 0.1}, exact=True)
+        local = ModalEngine(bench, chunk_size=40, executor="serial").evaluate(params, {"z": 0.1}, exact=True)
+        np.testing.assert_array_equal(remote.frequency, local.frequency)
+        np.testing.assert_array_equal(remote.poles, local.poles)
+        # the whole pipeline, given as an address (the estimator opens and closes its own client)
+    _same(_identify(bench, reference, dask_cluster), serial_run)
