@@ -254,3 +254,58 @@ def test_readme_python_api_runs(tmp_path, monkeypatch):
     block = README.read_text().split("## Python API", 1)[1].split("```python", 1)[1].split("```", 1)[0]
     monkeypatch.chdir(tmp_path)
     exec(compile(block, "README.md", "exec"), {})  # noqa: S102 (our own documentation)
+
+
+def _oscillators(omegas, zeta=0.02):
+    """State space of uncoupled unit-mass oscillators, x = [q, q'] (a stand-in with a .A/.B/.C interface)."""
+    from types import SimpleNamespace
+
+    n = len(omegas)
+    w = np.diag(np.asarray(omegas, dtype=float))
+    a = np.block([[np.zeros((n, n)), np.eye(n)], [-w**2, -2 * zeta * w]])
+    return SimpleNamespace(A=a, B=None, C=None)
+
+
+def _krylov_ranks(a, b, c):
+    n = a.shape[0]
+    ctrb = np.hstack([np.linalg.matrix_power(a, k) @ b for k in range(n)])
+    obsv = np.vstack([c @ np.linalg.matrix_power(a, k) for k in range(n)])
+    return np.linalg.matrix_rank(ctrb), np.linalg.matrix_rank(obsv)
+
+
+def test_pbh_ranks_agree_with_krylov_ranks_on_small_systems():
+    from cappe.cli.model import _pbh_ranks
+
+    ss = _oscillators([1.0, 2.0, 3.0])
+    # force on oscillators 1 and 2 only, displacement of oscillator 3 only
+    ss.B = np.array([[0, 0, 0, 1, 1, 0]], dtype=float).T
+    ss.C = np.array([[0, 0, 1, 0, 0, 0]], dtype=float)
+    assert _pbh_ranks(ss) == {"controllability_rank": 4, "observability_rank": 2}
+    assert _krylov_ranks(ss.A, ss.B, ss.C) == (4, 2)
+    # two identical oscillators driven by one force: a repeated pole pair, rank 1 per eigenvalue
+    ss = _oscillators([2.0, 2.0])
+    ss.B = np.array([[0, 0, 1, 1]], dtype=float).T
+    ss.C = np.array([[1, 0, 0, 0], [0, 1, 0, 0]], dtype=float)
+    assert _pbh_ranks(ss) == {"controllability_rank": 2, "observability_rank": 4}
+    assert _krylov_ranks(ss.A, ss.B, ss.C) == (2, 4)
+
+
+@pytest.mark.parametrize("name", ["two-mass-rig", "spindle-bearing"])
+def test_check_pbh_ranks_equal_the_exact_ones(capsys, name):
+    code, out, _ = run(capsys, "model", "check", f"builtin:{name}", "--json")
+    assert code == 0
+    data = json.loads(out)
+    assert data["exact"] is True
+    assert data["pbh"] == {"controllability_rank": data["controllability_rank"],
+                           "observability_rank": data["observability_rank"]}
+
+
+def test_check_skips_exact_tests_on_large_models(capsys):
+    code, out, _ = run(capsys, "model", "check", "builtin:uniaxial-machine-tool")
+    assert code == 0
+    assert "exact rank tests skipped: 90 states > 24" in out
+    assert "controllability rank 90, observability rank 90" in out
+    code, out, _ = run(capsys, "model", "check", "builtin:two-mass-rig", "--exact", "never", "--json")
+    data = json.loads(out)
+    assert data["exact"] is False
+    assert "invertibility" not in data

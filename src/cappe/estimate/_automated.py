@@ -585,7 +585,11 @@ class AutomatedIdentification(Estimator):
         is needed for the stiffness subproblems, ``ndd2`` for the damping row selection.
     weights : (float, float, float)
         ``(w_f, w_z, w_s)`` of the frequency, damping and shape residuals of the subproblems (``w_f``, ``w_s``) and
-        of the refinements (see :class:`ModalUpdatingEstimator`). With noisy references use inverse noise variances.
+        of the refinements (see :class:`ModalUpdatingEstimator`). The default gives relative damping residuals
+        the weight 0.01, the inverse variance ratio of typical modal-test scatter (damping ratios about ten times
+        less certain than frequencies): errors in the known damping of an imperfect model then do not pull the
+        stiffnesses (disturbed benchmark case, paper 3.3: worst stiffness error 5.6 % with weight 1, 2.6 % with
+        0.01). ``noise`` replaces these weights in the final refinement.
     residual_damping_threshold : float
         Smallest residual damping ratio of a damping row (paper: 0.005).
     damping_rows : int, optional
@@ -661,7 +665,7 @@ class AutomatedIdentification(Estimator):
         threshold: float = 0.01,
         validation: Mapping[str, float] | None = None,
         criteria: Sequence[str] = ("macxp", "ndd2"),
-        weights: tuple[float, float, float] = (1.0, 1.0, 1.0),
+        weights: tuple[float, float, float] = (1.0, 0.01, 1.0),
         residual_damping_threshold: float = 0.005,
         damping_rows: int | None = None,
         max_iterations: int = 50,
