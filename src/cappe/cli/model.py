@@ -390,7 +390,8 @@ def _pbh_ranks(ss: Any, tol: float = 1e-8) -> dict[str, int]:
     lam, w, v = sla.eig(a_bal, left=True, right=True)
     w = w / np.linalg.norm(w, axis=0)
     v = v / np.linalg.norm(v, axis=0)
-    nb, nc = max(np.linalg.norm(b_bal), 1e-300), max(np.linalg.norm(c_bal), 1e-300)
+    nb = max(float(np.linalg.norm(b_bal)), 1e-300)
+    nc = max(float(np.linalg.norm(c_bal)), 1e-300)
     # repeated eigenvalues (symmetric rotors, mirror-image structures): the test is on the whole eigenspace
     order = np.argsort(lam.real + 1e-3 * lam.imag)
     clusters: list[list[int]] = []
