@@ -20,13 +20,13 @@ def slide_reference(slide):
 
 def test_outputs_cover_every_mode_position_and_criterion(slide, slide_reference, monkeypatch, tmp_path):
     calls: list[int] = []
-    original = ModalEngine.evaluate
+    original = ModalEngine._solve
 
-    def counting(self, params=None, position=None, **kwargs):
-        calls.append(np.atleast_2d(params).shape[0])
+    def counting(self, params, position, **kwargs):
+        calls.append(params.shape[0])
         return original(self, params, position, **kwargs)
 
-    monkeypatch.setattr(ModalEngine, "evaluate", counting)
+    monkeypatch.setattr(ModalEngine, "_solve", counting)
     names = ["km", "kg0", "cm", "cg", "eta"]
     bounds = [[4e6, 1.6e7], [1.5e7, 6e7], [300, 2000], [100, 600], [0.01, 0.06]]
     res = model_sobol(slide, slide_reference, parameters=names, bounds=bounds, n=64, rng=3)

@@ -1,7 +1,7 @@
 """Correlation of model and measurement: mode-shape criteria, FRF criteria and mode pairing."""
 
 from cappe.correlate._frf import csac, csf, frac
-from cappe.correlate._modal import mac, macx, macxp, macxp_paired, ndd, nfd
+from cappe.correlate._modal import mac, macx, macxp, macxp_batch, macxp_paired, ndd, nfd
 from cappe.correlate._pairing import ModePairing, pair_modes
 
 __all__ = [
@@ -12,6 +12,7 @@ __all__ = [
     "mac",
     "macx",
     "macxp",
+    "macxp_batch",
     "macxp_paired",
     "ndd",
     "nfd",

@@ -10,7 +10,7 @@ from numpy.typing import ArrayLike, NDArray
 from cappe.correlate._validate import as_finite_array, as_poles, as_shapes, check_same_sensors, first_index
 from cappe.exceptions import DataError
 
-__all__ = ["mac", "macx", "macxp", "macxp_paired", "ndd", "nfd"]
+__all__ = ["mac", "macx", "macxp", "macxp_batch", "macxp_paired", "ndd", "nfd"]
 
 
 def _shape_sets(phi_a: ArrayLike, phi_x: ArrayLike) -> tuple[NDArray[Any], NDArray[Any]]:
@@ -217,6 +217,49 @@ def macxp_paired(
     cross_t = np.sum(a * x, axis=-2)
     return _macxp_core(cross_h, cross_t, _column_terms(a, np.asarray(lam_a), None),
                        _column_terms(x, np.asarray(lam_x), None))
+
+
+def macxp_batch(
+    phi_a: NDArray[Any], lam_a: NDArray[Any], phi_x: NDArray[Any], lam_x: NDArray[Any]
+) -> NDArray[np.float64]:
+    """MACXP of every mode of every batch member against every reference mode: shape (B, m_x, m_a).
+
+    The hot-path form of :func:`macxp` for a batch of model evaluations against one reference, as the
+    global sensitivity analysis needs it: no input validation; the cross products are two stacked matrix
+    products (``a^H x`` and ``a^T x``; one when the shapes are real), which is several times faster than
+    broadcasting :func:`macxp_paired` over an extra axis (that forms a (B, m_x, n_s, m_a) temporary).
+
+    Parameters
+    ----------
+    phi_a : ndarray, shape (B, n_sensors, m_a)
+        Shapes of the batch (real or complex).
+    lam_a : ndarray, shape (B, m_a)
+        Their poles in rad/s.
+    phi_x : ndarray, shape (n_sensors, m_x)
+        Reference shapes.
+    lam_x : ndarray, shape (m_x,)
+        Reference poles in rad/s.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> rng = np.random.default_rng(0)
+    >>> phi = rng.standard_normal((2, 4, 3)) + 1j * rng.standard_normal((2, 4, 3))
+    >>> lam = -rng.uniform(1, 5, (2, 3)) + 1j * rng.uniform(50, 90, (2, 3))
+    >>> out = macxp_batch(phi, lam, phi[0][:, :2], lam[0][:2])
+    >>> bool(np.allclose(out[1], macxp(phi[1], lam[1], phi[0][:, :2], lam[0][:2]).T))
+    True
+    """
+    a = np.asarray(phi_a)
+    x = np.asarray(phi_x)
+    at = np.swapaxes(a, -1, -2)
+    cross_t = np.swapaxes(at @ x, -1, -2)  # (B, m_x, m_a)
+    cross_h = cross_t if not np.iscomplexobj(a) else np.swapaxes(at.conj() @ x, -1, -2)
+    s_a, pole_a, den_a, root_a = _column_terms(a, np.asarray(lam_a), None)  # (B, m_a)
+    s_x, pole_x, den_x, root_x = _column_terms(x, np.asarray(lam_x), None)  # (m_x,)
+    terms_a = (s_a[:, None, :], pole_a[:, None, :], den_a[:, None, :], root_a[:, None, :])
+    terms_x = (s_x[:, None], pole_x[:, None], den_x[:, None], root_x[:, None])
+    return _macxp_core(cross_h, cross_t, terms_a, terms_x)
 
 
 def _column_terms(

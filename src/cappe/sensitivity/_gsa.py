@@ -9,6 +9,7 @@ output; the Sobol indices of all outputs come from one vectorized analysis.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -19,7 +20,7 @@ import pandas as pd
 from numpy.typing import ArrayLike, NDArray
 
 from cappe._rng import RandomLike
-from cappe.correlate import macxp_paired
+from cappe.correlate import macxp_batch
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalBatch, ModalEngine
@@ -112,9 +113,8 @@ def _outputs_for(batch: ModalBatch, data_set: ModalDataSet, criteria: Sequence[s
     shapes = batch.shapes if batch.complex_shapes is None else batch.complex_shapes
     valid = (freq > 0) & np.isfinite(poles)
     safe_poles = np.where(valid, poles, 1j)
-    # (B, 1, n_s, m) against (m_ref, n_s, 1): every model mode against every reference mode
-    values = macxp_paired(shapes[:, None, :, :], safe_poles[:, None, :], data_set.shapes.T[:, :, None],
-                          data_set.poles[:, None])
+    # every model mode against every reference mode: (B, m_ref, m)
+    values = macxp_batch(shapes, safe_poles, data_set.shapes, data_set.poles)
     values = np.where(valid[:, None, :], values, -1.0)
     best = np.argmax(values, axis=2)  # (B, m_ref)
     chosen = np.maximum(np.take_along_axis(values, best[:, :, None], axis=2)[:, :, 0], 0.0)
@@ -233,7 +233,9 @@ def model_sobol(
     def func(x: Array) -> Array:
         full = np.tile(nm.nominal, (x.shape[0], 1))
         full[:, columns] = x
-        parts = [_outputs_for(engine.evaluate(full, position, exact=exact), data_set, criteria)
+        # the criteria are computed inside each chunk, on the executor's workers (not after it, serially)
+        parts = [np.concatenate(engine.map(functools.partial(_outputs_for, data_set=data_set, criteria=criteria),
+                                           full, position, exact=exact), axis=0)
                  for data_set, position in zip(reference.sets, positions, strict=True)]
         return np.concatenate(parts, axis=1)
 
