@@ -463,3 +463,19 @@ def test_exact_problem_names_missing_modes(two_mass):
         ExactModalProblem(nm, space, three, (1.0, 1.0, 1.0)).residuals(space.start)
     with pytest.raises(DataError, match="only 2 oscillatory model modes at position"):
         validate_identification(model=nm, params={}, reference=three, n_freq=10)
+
+
+def test_validation_frf_criteria_equal_the_correlate_functions():
+    from cappe.correlate import csf, frac
+    from cappe.estimate._validation import _frf_criteria
+
+    rng = np.random.default_rng(4)
+    h_ref = rng.standard_normal((3, 2, 50)) + 1j * rng.standard_normal((3, 2, 50))
+    h_mod = h_ref * (1 + 0.3 * rng.standard_normal((3, 2, 50)))
+    h_ref[1, 0] *= 1e-12  # negligible reference power: left out
+    frac_v, csf_v = _frf_criteria(h_mod, h_ref)
+    assert np.isnan(frac_v[1, 0])
+    assert np.isnan(csf_v[1, 0])
+    for o, i in [(0, 0), (2, 1), (1, 1)]:
+        assert frac_v[o, i] == pytest.approx(float(frac(h_mod[o, i], h_ref[o, i])), rel=1e-12)
+        assert csf_v[o, i] == pytest.approx(float(np.mean(csf(h_mod[o, i][None], h_ref[o, i][None]))), rel=1e-12)

@@ -943,17 +943,12 @@ class AutomatedIdentification(Estimator):
         val_bar: Any = tqdm(total=len(data.sets) + n_perm, desc="validation", unit="model",
                             disable=not self.progress)
 
-        def check(params: Array, k: int) -> ValidationResult:
-            out = validate_identification(model=model, params=params, reference=data,
-                                          position=data.sets[k].position, truth=truth_vec, overlay=self.overlay)
-            val_bar.update(1)
-            return out
+        def check(job: tuple[Array, int]) -> ValidationResult:
+            params, k = job
+            return validate_identification(model=model, params=params, reference=data,
+                                           position=data.sets[k].position, truth=truth_vec, overlay=self.overlay)
 
-        held_result = None
-        if held is not None:
-            held_result = check(p_final, held)
-        ident_results = [check(p_final, k) for k in ident]
-        permuted: list[ValidationResult] = []
+        models: list[tuple[Array, int]] = [(p_final, k) for k in ([] if held is None else [held]) + list(ident)]
         perm_info: list[dict[str, Any]] = []
         if n_perm:
             perm_rng = np.random.default_rng(int(seeds[2]))
@@ -964,9 +959,15 @@ class AutomatedIdentification(Estimator):
                 order = _derangement(len(didx), perm_rng)
                 p_perm = final.copy()
                 p_perm[didx] = space.start[didx] * factors[order]
-                permuted.append(check(space.full(p_perm), target))
-                perm_info.append({"assignment": {damp_names[i]: damp_names[o] for i, o in enumerate(order)},
-                                  "statistics": permuted[-1].statistics()})
+                models.append((space.full(p_perm), target))
+                perm_info.append({"assignment": {damp_names[i]: damp_names[o] for i, o in enumerate(order)}})
+        # independent FRF validations: on the executor (numpy's solves release the GIL)
+        checked = runner.map(check, models, done=lambda _: val_bar.update(1))
+        held_result = None if held is None else checked.pop(0)
+        ident_results = checked[: len(ident)]
+        permuted = checked[len(ident):]
+        for info, result in zip(perm_info, permuted, strict=True):
+            info["statistics"] = result.statistics()
         val_bar.close()
         timings["validation"] = time.perf_counter() - t
         timings["total"] = time.perf_counter() - t_total
