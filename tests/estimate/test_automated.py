@@ -159,7 +159,13 @@ def test_gsa_significant_sets_contain_the_locally_dominant_parameters(ideal, ben
 # -- stages ------------------------------------------------------------------------------------------------------
 
 
-def test_subproblem_jacobian_matches_finite_differences(bench):
+@pytest.mark.parametrize("linear", [True, False])
+def test_subproblem_jacobian_matches_finite_differences(bench, monkeypatch, linear):
+    # linear: K and M derivatives shared by the batch; else (forced here) the batch is differentiated centrally
+    import cappe.estimate._automated as automated
+
+    if not linear:
+        monkeypatch.setattr(automated, "_constant_derivatives", lambda *args: None)
     reference = ModalEngine(bench).modal_data(POSITIONS[1:2], params=random_truth(bench, 5), exact=False)
     engine = ModalEngine(bench, sensors=list(reference.sensors))
     columns = np.array([bench.parameter_names.index(n) for n in ("me_kx", "me_kz", "bsd_kz")])
@@ -479,3 +485,21 @@ def test_validation_frf_criteria_equal_the_correlate_functions():
     for o, i in [(0, 0), (2, 1), (1, 1)]:
         assert frac_v[o, i] == pytest.approx(float(frac(h_mod[o, i], h_ref[o, i])), rel=1e-12)
         assert csf_v[o, i] == pytest.approx(float(np.mean(csf(h_mod[o, i][None], h_ref[o, i][None]))), rel=1e-12)
+
+
+def test_constant_derivatives_only_for_linear_parameters(tmp_path):
+    from cappe.estimate._automated import _constant_derivatives
+
+    text = (
+        "format: cappe.model/1\nname: nl\nparameters:\n  - {name: m, value: 2.0, kind: mass}\n"
+        "  - {name: k, value: 100.0, kind: stiffness}\n  - {name: a, value: 3.0, kind: other}\n"
+        "bodies:\n  - {name: b, mass: m, dofs: [x]}\n"
+        "elements:\n  - {name: s, bodies: [ground, b], stiffness: {x: k + a**2}}\n"
+    )
+    (tmp_path / "nl.yaml").write_text(text)
+    nm = NumericModel(load_model(str(tmp_path / "nl.yaml")))
+    linear = _constant_derivatives(nm, {}, np.array([nm.parameter_names.index(n) for n in ("m", "k")]))
+    assert linear is not None
+    np.testing.assert_array_equal(linear[0][:, 0, 0], [0.0, 1.0])  # dK/dm, dK/dk
+    np.testing.assert_array_equal(linear[1][:, 0, 0], [1.0, 0.0])  # dM/dm, dM/dk
+    assert _constant_derivatives(nm, {}, np.array([nm.parameter_names.index("a")])) is None  # dK/da = 2 a
