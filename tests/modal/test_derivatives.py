@@ -114,3 +114,19 @@ def test_derivatives_take_one_vector(slide):
     engine = ModalEngine(slide)
     with pytest.raises(ModelError, match="modal derivatives take a single parameter vector"):
         engine.derivatives(np.tile(engine.model.nominal, (2, 1)))
+
+
+def test_derivatives_for_chosen_parameters_are_those_columns(slide):
+    engine = ModalEngine(slide)
+    every = engine.derivatives(None, {"z": 0.2})
+    names = [slide.parameter_names[i] for i in (3, 0, 5)]
+    some = engine.derivatives(None, {"z": 0.2}, parameters=names)
+    cols = [slide.parameter_names.index(n) for n in names]
+    assert some.parameter_names == tuple(names)
+    np.testing.assert_array_equal(some.parameters, every.parameters[cols])
+    np.testing.assert_allclose(some.d_frequency, every.d_frequency[:, cols], rtol=1e-12, atol=0)
+    np.testing.assert_allclose(some.d_damping, every.d_damping[:, cols], rtol=1e-12, atol=1e-300)
+    np.testing.assert_allclose(some.d_shapes, every.d_shapes[:, :, cols], rtol=1e-10,
+                               atol=1e-12 * np.abs(every.d_shapes).max())
+    with pytest.raises(ModelError, match="unknown parameters \\['nope'\\]"):
+        engine.derivatives(None, {"z": 0.2}, parameters=["nope"])

@@ -222,7 +222,7 @@ class ModalUpdatingEstimator(Estimator):
         for data_set in sets:
             x = data_set.shapes / np.linalg.norm(data_set.shapes, axis=0, keepdims=True) if w_s > 0 else None
             targets.append(x)
-        cols = space.columns
+        cols = np.arange(space.n)  # derivatives come for the unknowns only, in their order
         cache: dict[bytes, tuple[Array, Array, list[_Pairing]]] = {}
 
         def evaluate(p: Array) -> tuple[Array, Array, list[_Pairing]]:
@@ -234,7 +234,7 @@ class ModalUpdatingEstimator(Estimator):
             jac: list[Array] = []
             pairings = []
             for data_set, x in zip(sets, targets, strict=True):
-                d = engine.derivatives(params, data_set.position)
+                d = engine.derivatives(params, data_set.position, parameters=space.names)
                 pairing = self._pair(d.frequency, d.damping, d.shapes, data_set)
                 pairings.append(pairing)
                 idx = pairing.model

@@ -244,14 +244,16 @@ class ModalEngine:
         position: Mapping[str, float] | None = None,
         *,
         track: ModeReference | bool = False,
+        parameters: Sequence[str] | None = None,
     ) -> ModalDerivatives:
         """Analytic derivatives of frequencies, damping ratios and sensor shapes at one parameter vector.
 
-        Returns a :class:`cappe.modal.ModalDerivatives`.
+        Returns a :class:`cappe.modal.ModalDerivatives`, with respect to ``parameters`` (default all; naming
+        only the ones needed saves most of the work on models with many parameters).
         """
         from cappe.modal._derivatives import derivatives
 
-        return derivatives(self, params, position, track=track)
+        return derivatives(self, params, position, track=track, parameters=parameters)
 
     def evaluate(
         self,
