@@ -503,3 +503,26 @@ def test_constant_derivatives_only_for_linear_parameters(tmp_path):
     np.testing.assert_array_equal(linear[0][:, 0, 0], [0.0, 1.0])  # dK/dm, dK/dk
     np.testing.assert_array_equal(linear[1][:, 0, 0], [1.0, 0.0])  # dM/dm, dM/dk
     assert _constant_derivatives(nm, {}, np.array([nm.parameter_names.index("a")])) is None  # dK/da = 2 a
+
+
+@pytest.mark.parametrize("noise", [None, (0.005, 0.05, 0.02)])
+def test_exact_problem_jacobian_matches_finite_differences(bench, noise):
+    # the analytic eigen-perturbation Jacobian against central differences of the residuals themselves,
+    # away from the truth (non-zero residuals) and with viscous, hysteretic and mass-like unknowns
+    truth = random_truth(bench, 21)
+    reference = ModalEngine(bench).modal_data(POSITIONS[1:3], params=truth)
+    names = [*STIFFNESS[:4], *DAMPING, "mt"]  # a mass too: dA then has its M^-1 dM M^-1 terms
+    bounds = {n: bench.structure.parameter(n).bounds for n in names[:-1]} | {"mt": (60.0, 100.0)}
+    space = ParameterSpace.from_model(bench, names, bounds=bounds, values=truth)
+    problem = ExactModalProblem(bench, space, reference, (1.0, 0.3, 2.0), noise)
+    p0 = np.sqrt(space.lower * space.upper)
+    jac = problem.jacobian(p0)
+    fd = np.empty_like(jac)
+    for i in range(space.n):
+        h = 1e-5 * p0[i]
+        up, down = p0.copy(), p0.copy()
+        up[i] += h
+        down[i] -= h
+        fd[:, i] = (problem.residuals(up) - problem.residuals(down)) / (2 * h)
+    scale = np.abs(fd).max(axis=0)
+    np.testing.assert_allclose(jac, fd, rtol=1e-4, atol=1e-6 * scale.max())

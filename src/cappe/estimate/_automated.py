@@ -1219,18 +1219,87 @@ class ExactModalProblem:
         return self._evaluate(np.asarray(p, dtype=float))[0]
 
     def jacobian(self, p: Array) -> Array:
-        """``d r / d p`` (n_r, n) by forward differences, one batched evaluation per set."""
+        """``d r / d p`` (n_r, n), analytic: first-order perturbation of the state matrix's eigen-decomposition.
+
+        With ``A V = V Lambda`` and ``W = V^-1``, a parameter change ``dA`` moves pole r by ``(W dA V)_rr`` and its
+        eigenvector by ``sum_{s != r} (W dA V)_sr / (lambda_r - lambda_s) v_s`` plus a multiple of ``v_r``, which the
+        residuals ignore (they are invariant to the complex scale of a shape). ``dA`` follows from the exact
+        matrix derivatives of the model. One eigen-decomposition per set instead of one per unknown.
+        """
         p = np.asarray(p, dtype=float)
-        r0, pairs = self._evaluate(p)
-        h = 1e-6 * np.where(p != 0, np.abs(p), 1.0)
-        shifted = p[None, :] + np.diag(h)
-        full = self.space.full(shifted)
-        cols = []
-        for k in range(len(self.reference.sets)):
-            poles, shapes = self._modes(full, k)
-            cols.append(self._residual(poles, shapes, k, pairs[k]))
-        res = np.concatenate(cols, axis=1)  # (n, n_r)
-        return np.asarray(((res - r0[None, :]) / h[:, None]).T, dtype=float)
+        _, pairs = self._evaluate(p)
+        full = self.space.full(p[None, :])[0]
+        columns = [self.model.parameter_names.index(n) for n in self.space.names]
+        blocks = []
+        for k, data_set in enumerate(self.reference.sets):
+            poles, _ = self._modes(full[None, :], k)
+            blocks.append(self._set_jacobian(full, k, poles[0][pairs[k]], columns, data_set))
+        return np.concatenate(blocks, axis=0)
+
+    def _set_jacobian(self, full: Array, k: int, paired: CArray, columns: list[int],
+                      data_set: ModalDataSet) -> Array:
+        """Jacobian rows of set ``k`` at the full parameter vector ``full`` (paired model poles given)."""
+        model, position = self.model, self.positions[k]
+        mats = model.matrices(full, position)
+        dmats = model.matrix_derivatives(full, position)
+        n = model.n_dof
+        stiff = mats["K"] + 1j * mats["H"]
+        visc = mats["C"] + mats["G"]
+        minv = np.linalg.inv(mats["M"])
+        state = np.zeros((2 * n, 2 * n), dtype=complex)
+        state[:n, n:] = np.eye(n)
+        state[n:, :n] = -(minv @ stiff)
+        state[n:, n:] = -(minv @ visc)
+        lam, vec = np.linalg.eig(state)
+        inv = np.linalg.inv(vec)
+        # the paired poles are eigenvalues of the same matrix (the engine builds it alike): find their columns
+        idx = np.array([int(np.argmin(np.abs(lam - pole))) for pole in paired])
+        lam_r = lam[idx]
+        sensors = self.engine._sensor_rows(position)[1]  # (n_s, n)
+        a = sensors @ vec[:n, idx]  # (n_s, m) complex sensor shapes (any scale)
+        x = self.targets[k]
+        c = np.sum(a.conj() * x, axis=0)  # a^H x per mode
+        aa = np.sum(np.abs(a) ** 2, axis=0)
+        gap = lam_r[None, :] - lam[:, None]  # (2n, m): lambda_r - lambda_s
+        own = np.zeros(gap.shape, dtype=bool)
+        own[idx, np.arange(idx.size)] = True
+        scale = max(float(np.abs(lam).max()), 1e-300)
+        near = own | (np.abs(gap) <= _REPEATED * scale)
+        safe_gap = np.where(near, 1.0, gap)
+        w_abs = np.abs(lam_r)
+        d_f, d_z, d_s = self.divisors[k]
+        rows_f, rows_z, rows_re, rows_im = [], [], [], []
+        for col in columns:
+            d_stiff = dmats["K"][col] + 1j * dmats["H"][col]
+            d_visc = dmats["C"][col] + (dmats["G"][col] if "G" in dmats else 0.0)
+            d_mass = dmats["M"][col]
+            d_state = np.zeros_like(state)
+            # d(M^-1 X) = M^-1 (dX - dM M^-1 X)
+            d_state[n:, :n] = -(minv @ (d_stiff - d_mass @ (minv @ stiff)))
+            d_state[n:, n:] = -(minv @ (d_visc - d_mass @ (minv @ visc)))
+            g = inv @ (d_state @ vec[:, idx])  # (2n, m): (W dA V)_{s r}
+            d_lam = g[idx, np.arange(idx.size)]
+            coef = np.where(near, 0.0, g / safe_gap)
+            da = sensors @ (vec[:n] @ coef)  # (n_s, m)
+            d_abs = (lam_r.conj() * d_lam).real / w_abs
+            rows_f.append(d_abs / (2 * np.pi) / data_set.frequency)
+            d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
+            rows_z.append(d_zeta / data_set.damping)
+            dc = np.sum(da.conj() * x, axis=0)
+            daa = 2 * np.sum((a.conj() * da).real, axis=0)
+            de = da * (c / aa)[None, :] + a * (dc / aa)[None, :] - a * (c * daa / aa**2)[None, :]
+            rows_re.append(de.real)
+            rows_im.append(de.imag)
+        parts = []
+        if d_f > 0:
+            parts.append(np.array(rows_f).T / d_f)  # (m, n_unknowns)
+        if d_z > 0:
+            parts.append(np.array(rows_z).T / d_z)
+        if np.all(d_s > 0):
+            for stack in (rows_re, rows_im):
+                de_all = np.array(stack) / d_s[None, None, :]  # (n_unknowns, n_s, m)
+                parts.append(de_all.reshape(len(columns), -1).T)
+        return np.concatenate(parts, axis=0)
 
     def pairing_report(self, p: Array) -> list[dict[str, Any]]:
         """Per set: the model mode paired with each reference mode at ``p``."""
