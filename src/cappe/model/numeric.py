@@ -129,10 +129,18 @@ class NumericModel:
         all_symbols = self._param_symbols + self._axis_symbols
         self._n_coef = len(coefficients)
         self._coefficients = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
-        self._pattern_funcs = {
-            name: sp.lambdify(self._axis_symbols, plan.affine_patterns, modules="numpy", cse=True)
-            for name, plan in self._plans.items()
-        }
+        # patterns are mostly zeros: generate code for the structural non-zeros only and scatter them (printing
+        # every entry of every dense pattern took most of the compile time of a 45-DOF model)
+        self._pattern_funcs: dict[str, tuple[int, NDArray[np.intp], Any]] = {}
+        for name, plan in self._plans.items():
+            where: list[int] = []
+            exprs: list[sp.Expr] = []
+            for t, pattern in enumerate(plan.affine_patterns):
+                for (i, j), value in sorted(sp.SparseMatrix(pattern).todok().items()):
+                    where.append((t * self.n_dof + i) * self.n_dof + j)
+                    exprs.append(value)
+            func = sp.lambdify(self._axis_symbols, exprs, modules="numpy", cse=True)
+            self._pattern_funcs[name] = (len(plan.affine_patterns), np.array(where, dtype=np.intp), func)
         self._residual_funcs = {
             name: sp.lambdify(all_symbols, plan.residual, modules="numpy", cse=True)
             for name, plan in self._plans.items()
@@ -279,15 +287,11 @@ class NumericModel:
         if cached is None:
             n = self.n_dof
             cached = {}
-            for name, func in self._pattern_funcs.items():
-                mats = func(*pos)
-                cached[name] = (
-                    np.array([np.broadcast_to(np.asarray(m, dtype=float), (n, n)) for m in mats]).reshape(
-                        len(mats), n * n
-                    )
-                    if mats
-                    else np.zeros((0, n * n))
-                )
+            for name, (n_terms, where, func) in self._pattern_funcs.items():
+                flat = np.zeros(n_terms * n * n)
+                if where.size:
+                    flat[where] = np.asarray(func(*pos), dtype=float)
+                cached[name] = flat.reshape(n_terms, n * n)
             self._pattern_cache[pos] = cached
         return cached
 
