@@ -1,8 +1,17 @@
-"""Run the benchmarks: ``python -m benchmarks`` (``make bench``)."""
+"""Run the benchmarks: ``python -m benchmarks`` (``make bench``; about 15 minutes on two cores)."""
 
 from __future__ import annotations
 
-from benchmarks import bench_estimate, bench_identify, bench_matrices, bench_modal, bench_sobol
+from benchmarks import (
+    bench_automated,
+    bench_estimate,
+    bench_identify,
+    bench_matrices,
+    bench_modal,
+    bench_pipeline,
+    bench_scaling,
+    bench_sobol,
+)
 
 
 def main() -> None:
@@ -11,6 +20,9 @@ def main() -> None:
     bench_sobol.main()
     bench_identify.main()
     bench_estimate.main()
+    bench_pipeline.main()
+    bench_automated.main()
+    bench_scaling.main()
 
 
 if __name__ == "__main__":
