@@ -9,6 +9,8 @@ import sys
 from collections.abc import Mapping
 from typing import Any
 
+import numpy as np
+
 from cappe.exceptions import DataError, ModelError
 from cappe.io import read_parameters, write_json
 from cappe.model import NumericModel, Structure, load_model
@@ -94,6 +96,16 @@ class ModelContext:
 
     def system(self) -> Any:
         return self.numeric.system(self.values, self.position)
+
+
+def dominant_dofs(mass: Any, shapes: Any) -> Any:
+    """Per mode, the DOF holding the largest share of its kinetic energy, ``Re(conj(phi_i) (M phi)_i)``.
+
+    Unlike the largest shape entry, this compares translations (m) and rotations (rad) in one unit (J).
+    """
+    phi = np.asarray(shapes)
+    energy = np.real(np.conj(phi) * (np.asarray(mass) @ phi))
+    return np.argmax(energy, axis=0)
 
 
 def emit(args: argparse.Namespace, data: Mapping[str, Any], text: str) -> None:

@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from cappe.cli._common import emit
+from cappe.cli._common import dominant_dofs, emit
 from cappe.exact import symbolic_transfer_function
 from cappe.model import NumericModel, derive, load_model
 from cappe.systems import transfer_function
@@ -60,8 +60,9 @@ def run(args: argparse.Namespace) -> int:
     lines.append("")
     lines.append("== spindle-bearing (Nickel 1999, 3.5 and 5.4; Table 5.8 values) ==")
     lines.append(f"{sm.n_modes} modes (exact complex):")
+    dominant = dominant_dofs(spindle.M, sm.shapes)
     for r in range(sm.n_modes):
-        k = int(np.argmax(np.abs(sm.shapes[:, r])))
+        k = int(dominant[r])
         lines.append(
             f"  mode {r + 1:>2}: {sm.frequency[r]:9.2f} Hz, damping {100 * sm.damping[r]:6.3f} %, dominant {sm.dofs[k]}"
         )

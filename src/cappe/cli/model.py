@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+from cappe.cli._common import ModelContext, UsageError, add_model_options, dominant_dofs, emit, names
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -203,10 +203,11 @@ def modes(args: argparse.Namespace) -> int:
             notes.append(f"first-order vs exact: frequencies within {100 * df:.3g} %, damping ratios within {dz:.3g}")
     lines = [
         f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
-        f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF",
+        f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF (kinetic energy)",
     ]
+    dominant = dominant_dofs(system.M, result.shapes)
     for r in range(result.n_modes):
-        k = int(np.argmax(np.abs(result.shapes[:, r])))
+        k = int(dominant[r])
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
         lines.append(f"{r + 1:>4} {result.frequency[r]:>15.3f} {100 * result.damping[r]:>12.4f}  {result.dofs[k]}{tag}")
     lines.extend(notes)
