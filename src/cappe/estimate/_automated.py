@@ -1269,15 +1269,18 @@ class ExactModalProblem:
         w_abs = np.abs(lam_r)
         d_f, d_z, d_s = self.divisors[k]
         rows_f, rows_z, rows_re, rows_im = [], [], [], []
+        # dA has only its lower block row, so W dA V = W[:, n:] (dA_low V): with W_low = W[:, n:] M^-1 and
+        # d(M^-1 X) = M^-1 (dX - dM M^-1 X), (W dA V) = -W_low (dK~ V_q + dC~ V_v) over the paired columns only
+        w_low = inv[:, n:] @ minv  # (2n, n)
+        v_q, v_v = vec[:n, idx], vec[n:, idx]  # displacement and velocity parts of the paired eigenvectors
+        minv_stiff_vq = minv @ (stiff @ v_q)
+        minv_visc_vv = minv @ (visc @ v_v)
         for col in columns:
-            d_stiff = dmats["K"][col] + 1j * dmats["H"][col]
-            d_visc = dmats["C"][col] + (dmats["G"][col] if "G" in dmats else 0.0)
-            d_mass = dmats["M"][col]
-            d_state = np.zeros_like(state)
-            # d(M^-1 X) = M^-1 (dX - dM M^-1 X)
-            d_state[n:, :n] = -(minv @ (d_stiff - d_mass @ (minv @ stiff)))
-            d_state[n:, n:] = -(minv @ (d_visc - d_mass @ (minv @ visc)))
-            g = inv @ (d_state @ vec[:, idx])  # (2n, m): (W dA V)_{s r}
+            d_low = (dmats["K"][col] + 1j * dmats["H"][col]) @ v_q
+            d_low += (dmats["C"][col] + (dmats["G"][col] if "G" in dmats else 0.0)) @ v_v
+            if np.any(dmats["M"][col]):
+                d_low -= dmats["M"][col] @ (minv_stiff_vq + minv_visc_vv)
+            g = -(w_low @ d_low)  # (2n, m): (W dA V)_{s r}
             d_lam = g[idx, np.arange(idx.size)]
             coef = np.where(near, 0.0, g / safe_gap)
             da = sensors @ (vec[:n] @ coef)  # (n_s, m)
