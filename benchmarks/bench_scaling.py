@@ -112,6 +112,7 @@ def main() -> None:
 
 def _plot(dof: list[dict[str, Any]], unk: list[dict[str, Any]], exponents: dict[str, float]) -> None:
     import matplotlib
+    import matplotlib.ticker
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -121,8 +122,10 @@ def _plot(dof: list[dict[str, Any]], unk: list[dict[str, Any]], exponents: dict[
                                  (axes[1], unk, "n_unknowns", "unknown parameters")):
         x = [r[key] for r in rows]
         ax.loglog(x, [r["fit_s"] for r in rows], "o-", color="k", label="total")
-        for stage in ("gsa", "stiffness_subproblems", "joint_refinement"):
+        for stage in ("gsa", "stiffness_subproblems", "stiffness_refinement", "joint_refinement"):
             ax.loglog(x, [r["stages_s"][stage] for r in rows], ".--", label=stage.replace("_", " "))
+        ax.set_xticks(x, [str(v) for v in x])
+        ax.xaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
         ax.set_xlabel(label)
         ax.set_ylabel("time (s)")
         ax.set_title(f"t ~ {key.replace('n_', '')}^{exponents['n_dof' if key == 'n_dof' else 'unknowns']:.2f}")

@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.add_argument("-o", "--out", metavar="FILE", help="write the result to FILE (JSON)")
     p.add_argument("--no-identify", dest="identify", action="store_false",
-                   help="skip the automated identification of the uniaxial machine tool (about a minute)")
+                   help="skip the automated identification of the uniaxial machine tool (about 20 s)")
     p.add_argument("--report", metavar="FILE.html", default="cappe-demo-report.html",
                    help="HTML report of the identification (default cappe-demo-report.html)")
     p.add_argument("--n-gsa", type=int, default=256, help="identification: Sobol base sample (default 256)")
