@@ -1,5 +1,6 @@
-"""Structure descriptions, YAML model files, exact symbolic derivation and compiled numeric models."""
+"""Structure descriptions, YAML model files, exact symbolic derivation, compiled numeric models, bearing stiffness."""
 
+from cappe.model.bearing import AngularContactBearing, BearingState
 from cappe.model.loader import FORMAT, load_model, structure_from_mapping
 from cappe.model.numeric import NumericModel, compile_model
 from cappe.model.structure import (
@@ -20,7 +21,9 @@ from cappe.model.symbolic import SymbolicModel, derive
 __all__ = [
     "FORMAT",
     "GROUND",
+    "AngularContactBearing",
     "Axis",
+    "BearingState",
     "Body",
     "Input",
     "NumericModel",
