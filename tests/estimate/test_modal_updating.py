@@ -173,15 +173,34 @@ def test_frequencies_and_shapes_still_miss_the_scale(two_mass):
 
 
 def test_preload_law_reports_the_undetermined_combination(spindle, spindle_reference):
-    # every bearing stiffness is k * preload^(1/3): with the five k and the preload unknown only the products are
-    # determined; in relative changes the null direction is dk/k = -dpreload / (3 preload) for all five k, i.e.
-    # (1, 1, 1, 1, 1, -3) / sqrt(14): 0.27 for each k and 0.80 for the preload, of opposite signs
+    # every bearing stiffness is k times the Hertz stiffness ratio of the 110H at the preload (radial r(p) for four,
+    # axial a(p) for kfz): with the five k and the preload unknown only the products are determined. In relative
+    # changes the null direction is dk/k = -s dp/p with the log-slopes s_r = d ln r / d ln p and s_a of the bearing
+    # law, i.e. (-s_r, -s_r, -s_a, -s_r, -s_r, 1) normalized; the slopes here come from the bearing model directly.
+    import math
+
+    from cappe.model.bearing import AngularContactBearing
+
+    bearing = AngularContactBearing(18, 0.0079375, 0.065, math.radians(15))
     names = [*SPINDLE_UNKNOWNS, "preload"]
     est = ModalUpdatingEstimator(spindle, names).fit(spindle_reference).estimate_
-    assert _single_combination(est, names) == {**dict.fromkeys(SPINDLE_UNKNOWNS, -0.27), "preload": 0.8}
     values = dict(zip(est.names, est.values, strict=True))
+    load = 378.0 * values["preload"]
+
+    def ratio(kind: str, f: float) -> float:
+        state, ref = bearing.state(f), bearing.state(378.0)
+        return getattr(state, f"{kind}_stiffness") / getattr(ref, f"{kind}_stiffness")
+
+    h = 1e-4
+    slope = {kind: (math.log(ratio(kind, load * (1 + h))) - math.log(ratio(kind, load * (1 - h)))) / (2 * h)
+             for kind in ("radial", "axial")}
+    direction = np.array([slope["axial"] if n == "kfz" else slope["radial"] for n in SPINDLE_UNKNOWNS] + [-1.0])
+    direction = -direction / np.linalg.norm(direction)
+    got = _single_combination(est, names)
+    np.testing.assert_allclose([got[n] for n in names], direction, atol=0.0051)  # printed with two decimals
     for name in SPINDLE_UNKNOWNS:  # the products are the true ones (optimizer tolerance 1e-6)
-        assert values[name] * values["preload"] ** (1 / 3) == pytest.approx(SPINDLE_TRUTH[name], rel=1e-6)
+        kind = "axial" if name == "kfz" else "radial"
+        assert values[name] * ratio(kind, load) == pytest.approx(SPINDLE_TRUTH[name], rel=1e-6)
 
 
 def test_undamped_reference_pairs_by_mac(two_mass):

@@ -87,3 +87,39 @@ def test_bad_geometry_and_loads_are_errors():
         BARDEN.state(-1.0)
     with pytest.raises(ModelError, match="curvature difference"):
         ellipticity(1.2)
+
+
+def test_spindle_model_scales_its_bearings_by_the_hertz_law():
+    # builtin:spindle-bearing multiplies the Table 5.8 stiffnesses by the 110H ratio at 378 N x preload
+    from cappe.model import NumericModel, load_model
+
+    nm = NumericModel(load_model("builtin:spindle-bearing"))
+    bearing = AngularContactBearing(18, 0.0079375, 0.065, math.radians(15.0))
+    k_nominal = nm.matrices(nm.nominal)["K"]
+    p = nm.nominal.copy()
+    i = nm.parameter_names.index("preload")
+    p[i] = 1.5
+    k_preloaded = nm.matrices(p)["K"]
+    ratio_r = bearing.state(567.0).radial_stiffness / bearing.state(378.0).radial_stiffness
+    ratio_a = bearing.state(567.0).axial_stiffness / bearing.state(378.0).axial_stiffness
+    # the bearing part of K: K(p) - K(p with all bearing stiffnesses zero)
+    zero = {n: 0.0 for n in ("kfx", "kfy", "kfz", "krx", "kry")}
+    base = nm.matrices(nm.vector(zero))["K"]
+    bearings_nominal = k_nominal - base
+    q = nm.vector(zero)
+    q[i] = 1.5
+    bearings_preloaded = k_preloaded - nm.matrices(q)["K"]
+    spindle_z = nm.dofs.index("spindle.z")
+    assert bearings_preloaded[spindle_z, spindle_z] == pytest.approx(ratio_a * bearings_nominal[spindle_z, spindle_z],
+                                                                       rel=1e-10)
+    spindle_x = nm.dofs.index("spindle.x")
+    assert bearings_preloaded[spindle_x, spindle_x] == pytest.approx(ratio_r * bearings_nominal[spindle_x, spindle_x],
+                                                                       rel=1e-10)
+    # the exact derivative with respect to the preload (through the law's slope) against central differences
+    d_k = nm.matrix_derivatives(p)["K"][i]
+    h = 1e-5
+    up, down = p.copy(), p.copy()
+    up[i] += h
+    down[i] -= h
+    fd = (nm.matrices(up)["K"] - nm.matrices(down)["K"]) / (2 * h)
+    np.testing.assert_allclose(d_k, fd, rtol=1e-6, atol=1e-9 * np.abs(fd).max())

@@ -20,6 +20,7 @@ from sympy.parsing.sympy_parser import (
 )
 
 from cappe.exceptions import ModelError
+from cappe.model.bearing import acb_axial, acb_radial
 
 __all__ = ["FUNCTIONS", "NAME_PATTERN", "as_expression", "symbol"]
 
@@ -40,6 +41,9 @@ FUNCTIONS: dict[str, object] = {
     "log": sp.log,
     "pi": sp.pi,
     "abs": sp.Abs,
+    # stiffness of an angular-contact ball bearing relative to a reference preload (cappe.model.bearing)
+    "acb_radial": acb_radial,
+    "acb_axial": acb_axial,
 }
 
 # Decimal literals become exact rationals (0.135 -> 27/200) so that exact algebra sees exactly what the
