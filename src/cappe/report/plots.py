@@ -16,6 +16,7 @@ __all__ = [
     "frf_plot",
     "landscape_plot",
     "pole_zero_plot",
+    "preload_map_plot",
     "pruning_plot",
     "response_plot",
     "sobol_plot",
@@ -300,4 +301,22 @@ def sobol_plot(result: Any, path: str | Path, *, outputs: Any = None, top: int =
         ax.set_title(output, fontsize=9)
         ax.grid(True, axis="y", alpha=0.3)
     axes[0, 0].legend(loc="best", fontsize=8)
+    return _save(fig, path)
+
+
+def preload_map_plot(preload_map: Any, path: str | Path, title: str = "") -> Path:
+    """Frequency-damping map over preload (thesis Fig. 5.30): one trace per mode, preloads labelled in %."""
+    fig, axes = _figure(1)
+    ax = axes
+    for j, mode in enumerate(preload_map.modes):
+        f, z = preload_map.frequency[:, j], 100 * preload_map.damping[:, j]
+        ax.plot(f, z, "o-", ms=4, label=f"mode {mode}")
+        for k in (0, len(f) // 2, len(f) - 1):
+            ax.annotate(f"{100 * preload_map.preload[k]:.0f} %", (f[k], z[k]), fontsize=7, xytext=(3, 3),
+                        textcoords="offset points")
+    ax.set_xlabel("natural frequency (Hz)")
+    ax.set_ylabel("damping ratio (%)")
+    ax.grid(True, alpha=0.3)
+    ax.legend(loc="best", fontsize=8)
+    ax.set_title(title or "frequency-damping map over preload")
     return _save(fig, path)

@@ -1,0 +1,109 @@
+"""``cappe monitor preload``: how a model's modes and FRFs move with the bearing preload (thesis 5.4.3)."""
+
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+import numpy as np
+
+from cappe.cli._common import ModelContext, UsageError, add_model_options, band, emit, names
+
+
+def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    parser = sub.add_parser("monitor", help="condition monitoring: preload studies")
+    cmds = parser.add_subparsers(dest="monitor_command", metavar="COMMAND", required=True)
+    p = cmds.add_parser(
+        "preload",
+        help="frequency-damping map over preload, FRFs at 75/100/125 %%, which sensor sees which mode",
+        description=(
+            "Thesis Figs 5.30-5.32 for any model with a preload parameter: exact modes over the preloads (each "
+            "mode followed by its shape), their log-sensitivity to the preload, the FRFs of one input at three "
+            "preloads, and each output's level at each mode (dB below its strongest)."
+        ),
+    )
+    add_model_options(p)
+    p.add_argument("--parameter", default="preload", help="the preload parameter (default preload)")
+    p.add_argument("--preloads", metavar="LIST",
+                   help="comma-separated preloads (default the thesis's 0.05 ... 1.5 of nominal)")
+    p.add_argument("--modes", metavar="LIST", default="1,2,3,4,5", help="modes to follow (default 1,2,3,4,5)")
+    p.add_argument("--input", help="input of the FRFs (default the model's first)")
+    p.add_argument("--outputs", metavar="LIST", help="outputs of the FRFs (default all)")
+    p.add_argument("--bode-preloads", metavar="LIST", default="0.75,1,1.25",
+                   help="preloads of the FRFs (default 0.75,1,1.25)")
+    p.add_argument("--band", metavar="LO:HI", help="FRF band in Hz (default 0 to 1.5 x the highest mode followed)")
+    p.add_argument("--plot-map", metavar="FILE.png", help="write the frequency-damping map")
+    p.add_argument("--plot-bode", metavar="FILE.png", help="write the FRFs at the --bode-preloads")
+    p.set_defaults(func=preload)
+
+
+def _numbers(text: str | None, option: str) -> list[float] | None:
+    if text is None:
+        return None
+    try:
+        return [float(v) for v in names(text) or []]
+    except ValueError as exc:
+        msg = f"{option} must be comma-separated numbers; got {text!r}"
+        raise UsageError(msg) from exc
+
+
+def preload(args: argparse.Namespace) -> int:
+    from cappe.monitor import THESIS_PRELOADS, preload_frfs, preload_map, sensor_visibility
+    from cappe.report import bode_plot, preload_map_plot
+    from cappe.systems.frf import FRFData
+
+    ctx = ModelContext(args)
+    preloads = _numbers(args.preloads, "--preloads") or list(THESIS_PRELOADS)
+    modes_text = _numbers(args.modes, "--modes") or []
+    if any(m != int(m) for m in modes_text):
+        msg = f"--modes must be whole mode numbers; got {args.modes!r}"
+        raise UsageError(msg)
+    bode_at = _numbers(args.bode_preloads, "--bode-preloads") or [1.0]
+    given = {n: v for n, v in ctx.overrides.items() if n != args.parameter}
+    result = preload_map(ctx.numeric, preloads, [int(m) for m in modes_text], parameter=args.parameter,
+                         params=given, position=ctx.position)
+    sens = result.sensitivity() if len(preloads) >= 3 else np.full(len(result.modes), np.nan)
+    inputs = [args.input] if args.input else list(ctx.numeric.input_names[:1])
+    outputs = names(args.outputs) or list(ctx.numeric.output_names)
+    lo, hi = band(args.band) if args.band else (0.0, 1.5 * float(result.frequency.max()))
+    freq = np.linspace(max(lo, 1e-3 * hi), hi, 1500)
+    frfs = preload_frfs(ctx.numeric, freq, bode_at, inputs=inputs, outputs=outputs, parameter=args.parameter,
+                        params=given, position=ctx.position)
+    nominal = frfs[min(frfs, key=lambda v: abs(v - result.reference))]
+    k_ref = int(np.argmin(np.abs(result.preload - result.reference)))
+    levels = sensor_visibility(nominal, result.frequency[k_ref])[:, 0, :]  # (n_out, m)
+
+    lines = [f"{ctx.structure.name}: modes {', '.join(map(str, result.modes))} over {args.parameter} "
+             f"(followed by shape from {args.parameter} = {result.reference:g})"]
+    head = f"  {args.parameter:>8} " + " ".join(f"{'mode ' + str(m) + ' Hz / %':>18}" for m in result.modes)
+    lines.append(head)
+    for k, value in enumerate(result.preload):
+        cells = " ".join(f"{result.frequency[k, j]:10.2f} /{100 * result.damping[k, j]:5.2f}"
+                         for j in range(len(result.modes)))
+        lines.append(f"  {value:8.3g} {cells}")
+    lines.append("  d ln f / d ln preload: " + ", ".join(f"mode {m} {s:.3f}" for m, s in zip(result.modes, sens,
+                                                                                              strict=True)))
+    lines.append(f"level of each mode in the FRFs from {inputs[0]} (dB below the output's strongest mode):")
+    for o, out in enumerate(nominal.output_names):
+        lines.append(f"  {out:>8} " + " ".join(f"{levels[o, j]:7.1f}" for j in range(len(result.modes))))
+    files: dict[str, Any] = {}
+    if args.plot_map:
+        preload_map_plot(result, args.plot_map, title=f"{ctx.structure.name}: frequency-damping map")
+        files["map"] = args.plot_map
+        lines.append(f"wrote {args.plot_map}")
+    if args.plot_bode:
+        # one FRF set with an output per (output, preload), so that the Bode plot overlays them
+        stacked = np.concatenate([frfs[v].H for v in bode_at], axis=0)
+        labels = tuple(f"{out} @ {100 * v:g} %" for v in bode_at for out in outputs)
+        overlay = FRFData(freq=freq, H=stacked, input_names=tuple(inputs), output_names=labels)
+        bode_plot(overlay, args.plot_bode, title=f"{ctx.structure.name}: FRFs from {inputs[0]} over preload")
+        files["bode"] = args.plot_bode
+        lines.append(f"wrote {args.plot_bode}")
+    data = {"model": ctx.structure.name, "map": result.to_dict(), "input": inputs[0], "outputs": outputs,
+            "visibility_db": {out: levels[o].tolist() for o, out in enumerate(nominal.output_names)},
+            "files": files}
+    emit(args, data, "\n".join(lines))
+    return 0
+
+
+__all__ = ["register"]
