@@ -36,6 +36,62 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--plot-bode", metavar="FILE.png", help="write the FRFs at the --bode-preloads")
     p.set_defaults(func=preload)
 
+    q = cmds.add_parser(
+        "bearing-test",
+        help="front and rear bearing stiffness from a quasi-static force/displacement test",
+        description=(
+            "Thesis 5.4.4 / App. C4: a slow force on the shaft and two displacement probes (shaft relative to "
+            "housing) away from the bearings; rigid-shaft kinematics and the lever rule give each bearing's "
+            "stiffness sample by sample (coefficients from the geometry), with mean, std and 95 %% interval."
+        ),
+    )
+    q.add_argument("data", metavar="DATA", help="time data (UFF 58, CSV or npz)")
+    q.add_argument("--force", required=True, help="force channel (N)")
+    q.add_argument("--displacements", required=True, metavar="D1,D2", help="the two probe channels (m)")
+    q.add_argument("--z-force", type=float, required=True, help="axial position of the force (m)")
+    q.add_argument("--z-bearings", required=True, metavar="FRONT,REAR", help="axial positions of the bearings (m)")
+    q.add_argument("--z-sensors", required=True, metavar="Z1,Z2", help="axial positions of the probes (m)")
+    q.add_argument("--min-force", type=float, default=0.3,
+                   help="leave out samples below this fraction of the largest force (default 0.3)")
+    q.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    q.add_argument("-o", "--out", metavar="FILE", help="write the result to FILE (JSON)")
+    q.set_defaults(func=bearing_test)
+
+
+def _pair(text: str, option: str) -> tuple[float, float]:
+    values = _numbers(text, option) or []
+    if len(values) != 2:
+        msg = f"{option} must be two comma-separated numbers; got {text!r}"
+        raise UsageError(msg)
+    return values[0], values[1]
+
+
+def bearing_test(args: argparse.Namespace) -> int:
+    from cappe.io import read_time_data
+    from cappe.monitor import static_bearing_stiffness
+
+    data = read_time_data(args.data)
+    probes = names(args.displacements) or []
+    if len(probes) != 2:
+        msg = f"--displacements must name two channels; got {args.displacements!r}"
+        raise UsageError(msg)
+    z_front, z_rear = _pair(args.z_bearings, "--z-bearings")
+    z1, z2 = _pair(args.z_sensors, "--z-sensors")
+    result = static_bearing_stiffness(data.channel(args.force), data.channel(probes[0]), data.channel(probes[1]),
+                                      z_force=args.z_force, z_front=z_front, z_rear=z_rear, z_sensors=(z1, z2),
+                                      min_force=args.min_force)
+    summary = result.summary()
+    lines = [f"{args.data}: {int(result.used.sum())} of {result.used.size} samples used "
+             f"(|{args.force}| >= {args.min_force:g} x its largest)"]
+    for name in ("front", "rear"):
+        c, a1, a2 = result.coefficients[name]
+        s = summary[name]
+        lines.append(f"  {name:5s} k = {c:.4g} F / ({a1:+.4g} {probes[0]} {a2:+.4g} {probes[1]}): mean {s['mean']:.4g} "
+                     f"N/m, std {100 * s['std'] / s['mean']:.2g} %, 95 % interval [{s['ci95_low']:.4g}, "
+                     f"{s['ci95_high']:.4g}]")
+    emit(args, {"data": args.data, **result.to_dict()}, "\n".join(lines))
+    return 0
+
 
 def _numbers(text: str | None, option: str) -> list[float] | None:
     if text is None:
