@@ -260,6 +260,11 @@ def _numeric(func: Callable[..., float], kind: str) -> Callable[..., np.ndarray]
     return call
 
 
+def _numbers(*args: sp.Expr) -> list[float] | None:
+    """The arguments as floats when all are numbers (then sympy evaluates the function), else None."""
+    return [float(a) for a in args] if all(a.is_Number for a in args) else None
+
+
 class _BearingRatio(sp.Function):  # type: ignore[misc]
     """Base of the model-file functions ``acb_radial`` and ``acb_axial`` (see above)."""
 
@@ -268,11 +273,12 @@ class _BearingRatio(sp.Function):  # type: ignore[misc]
 
     @classmethod
     def eval(cls, load: sp.Expr, reference: sp.Expr, *geometry: sp.Expr) -> sp.Expr | None:
-        if load.is_Number and reference.is_Number and all(g.is_Number for g in geometry):
-            if load == reference:
-                return sp.Integer(1)  # keeps exact algebra exact at the reference preload
-            return sp.Float(_ratio(cls.kind, float(load), float(reference), *(float(g) for g in geometry)))
-        return None
+        values = _numbers(load, reference, *geometry)
+        if values is None:
+            return None
+        if load == reference:
+            return sp.Integer(1)  # keeps exact algebra exact at the reference preload
+        return sp.Float(_ratio(cls.kind, *values))
 
     def fdiff(self, argindex: int = 1) -> sp.Expr:
         if argindex != 1:
@@ -286,9 +292,8 @@ class _BearingSlope(sp.Function):  # type: ignore[misc]
 
     @classmethod
     def eval(cls, load: sp.Expr, reference: sp.Expr, *geometry: sp.Expr) -> sp.Expr | None:
-        if load.is_Number and reference.is_Number and all(g.is_Number for g in geometry):
-            return sp.Float(_slope(cls.kind, float(load), float(reference), *(float(g) for g in geometry)))
-        return None
+        values = _numbers(load, reference, *geometry)
+        return None if values is None else sp.Float(_slope(cls.kind, *values))
 
 
 class acb_radial(_BearingRatio):  # noqa: N801 - the name model files use
