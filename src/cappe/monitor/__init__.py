@@ -1,15 +1,91 @@
-"""Monitoring: preload studies (frequency-damping maps, FRFs over preload, sensor visibility) and the
-quasi-static bearing stiffness test."""
+"""Condition monitoring (thesis Fig. 1.1): the chain from a measurement to a graded diagnosis, its history store
+and dashboard, and the bearing-preload studies behind it.
 
+- machine description: :class:`MonitorConfig` (components = stiffness groups that fail together), :func:`default_config`;
+- chain: :class:`Monitor` (pre-processing, features, fast and slow parameter estimation, detection, diagnosis,
+  severity), :func:`ingest`, :func:`learn_store_baseline`, :func:`register_machine`;
+- building blocks: :class:`FactorEstimator`, :func:`modal_features`, :func:`frf_features`, :class:`Baseline`,
+  :class:`SequentialDetector` (CUSUM / EWMA designed by ARL), :func:`diagnose` with :class:`FaultHypothesis`;
+- data: :func:`simulate_scenario` (healthy drift, bearing loss, loosening screw, preload loss);
+- preload studies: :func:`preload_map`, :func:`preload_frfs`, :func:`sensor_visibility`, and the quasi-static
+  bearing stiffness test :func:`static_bearing_stiffness`.
+"""
+
+from cappe.monitor._baseline import BASELINE_FORMAT, Baseline, learn_baseline
+from cappe.monitor._chain import Alarm, Analysis, IngestResult, Monitor, ingest, learn_store_baseline, register_machine
+from cappe.monitor._config import (
+    CONFIG_FORMAT,
+    SEVERITY_GRADES,
+    Component,
+    MonitorConfig,
+    SeverityThresholds,
+    default_components,
+    default_config,
+)
+from cappe.monitor._detection import (
+    ChartSignal,
+    SequentialDetector,
+    cusum_arl,
+    cusum_limit,
+    ewma_arl,
+    ewma_limit,
+)
+from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
+from cappe.monitor._estimation import FactorEstimate, FactorEstimator
+from cappe.monitor._features import frf_features, modal_features
 from cappe.monitor._preload import THESIS_PRELOADS, PreloadMap, preload_frfs, preload_map, sensor_visibility
+from cappe.monitor._scenario import (
+    SCENARIO_FORMAT,
+    SCENARIOS,
+    ScenarioMeasurement,
+    read_scenario,
+    simulate_scenario,
+    write_scenario,
+)
 from cappe.monitor._static import StaticBearingTest, static_bearing_stiffness
 
 __all__ = [
+    "BASELINE_FORMAT",
+    "CONFIG_FORMAT",
+    "SCENARIOS",
+    "SCENARIO_FORMAT",
+    "SEVERITY_GRADES",
     "THESIS_PRELOADS",
+    "Alarm",
+    "Analysis",
+    "Baseline",
+    "ChartSignal",
+    "Component",
+    "Diagnosis",
+    "FactorEstimate",
+    "FactorEstimator",
+    "FaultHypothesis",
+    "IngestResult",
+    "Monitor",
+    "MonitorConfig",
     "PreloadMap",
+    "ScenarioMeasurement",
+    "SequentialDetector",
+    "SeverityThresholds",
     "StaticBearingTest",
+    "cusum_arl",
+    "cusum_limit",
+    "default_components",
+    "default_config",
+    "diagnose",
+    "ewma_arl",
+    "ewma_limit",
+    "frf_features",
+    "ingest",
+    "learn_baseline",
+    "learn_store_baseline",
+    "modal_features",
     "preload_frfs",
     "preload_map",
+    "read_scenario",
+    "register_machine",
     "sensor_visibility",
+    "simulate_scenario",
     "static_bearing_stiffness",
+    "write_scenario",
 ]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import ConvergenceWarning, DataError
 from cappe.model import NumericModel
@@ -183,12 +183,12 @@ class FactorEstimator:
 
     def _scale(self, freq: Array) -> CArray:
         """(i omega)^order per output and line: displacement FRFs to the measured quantity."""
-        return (1j * 2 * np.pi * freq)[None, :] ** self._order[:, None]
+        return np.asarray((1j * 2 * np.pi * freq)[None, :] ** self._order[:, None], dtype=complex)
 
     def frf(self, log_factor: Array, freq: Array) -> CArray:
         """Model FRFs H[out, in, freq] at ``log_factor``."""
         _, lt = self._dynamic(self.parameters(log_factor), np.asarray(freq, dtype=float))
-        return np.moveaxis(lt @ self._B, 0, -1) * self._scale(freq)[:, None, :]
+        return np.asarray(np.moveaxis(lt @ self._B, 0, -1) * self._scale(freq)[:, None, :], dtype=complex)
 
     def _jacobian(self, p: Array, freq: Array, x: CArray, lt: CArray,
                   groups: Sequence[NDArray[np.intp]] | None = None) -> CArray:
@@ -247,15 +247,15 @@ class FactorEstimator:
             msg = (f"FRF data have {int(keep.sum())} lines in the band {self.band[0]:g}-{self.band[1]:g} Hz; "
                    f"at least {2 * len(self.names)} are needed")
             raise DataError(msg)
-        oo = [data.output_names.index(n) for n in self.outputs]
-        ii = [data.input_names.index(n) for n in self.inputs]
+        oo = np.array([data.output_names.index(n) for n in self.outputs], dtype=np.intp)
+        ii = np.array([data.input_names.index(n) for n in self.inputs], dtype=np.intp)
         h = np.asarray(data.H)[np.ix_(oo, ii, np.flatnonzero(keep))]
         if not np.all(np.isfinite(h)):
             msg = "FRF data contain non-finite values in the band"
             raise DataError(msg)
         return freq[keep], h
 
-    def fit(self, data: FRFData, start: Sequence[float] | None = None, *, max_iter: int = 50) -> FactorEstimate:
+    def fit(self, data: FRFData, start: ArrayLike | None = None, *, max_iter: int = 50) -> FactorEstimate:
         """Levenberg-Marquardt fit of the log-factors to ``data`` (from ``start``, default 0 = the reference).
 
         The residual is the weighted complex logarithm ``w ln(H_model / H_measured)`` (log magnitude and phase):
@@ -314,13 +314,17 @@ class FactorEstimator:
                     break
             if not cost_new <= cost:
                 message = "no step reduces the cost"
-                converged = np.linalg.norm(grad) < 1e-8 * max(1.0, cost)
+                converged = bool(np.linalg.norm(grad) < 1e-8 * max(1.0, cost))
                 break
             s = s + step
             improvement = cost - cost_new
+            # the step in units of the estimate's own standard deviation (its Mahalanobis length): once it is
+            # below 1 % of one, further iterations cannot change the result in any way that matters
+            variance = 2.0 * cost_new / max(r_new.size - n, 1)
+            decrement = float(step @ jtj @ step) / max(variance, 1e-300)
             r, jac, cost = r_new, jac_new, cost_new
             lam = max(lam / 10.0, 1e-12)
-            if np.max(np.abs(step)) < 1e-7 or improvement <= 1e-10 * max(cost, 1e-300):
+            if decrement < 1e-4 or np.max(np.abs(step)) < 1e-9 or improvement <= 1e-12 * max(cost, 1e-300):
                 message = "converged"
                 converged = True
                 break
@@ -334,7 +338,7 @@ class FactorEstimator:
             message = f"{message}; Jacobian rank {rank} < {n} groups (not all identifiable from these channels)"
         if not success:
             warnings.warn(f"stiffness-factor fit: {message}", ConvergenceWarning, stacklevel=2)
-        return FactorEstimate(self.names, s, covariance, cost, float(np.sqrt(sigma2)), iterations, success, message)
+        return FactorEstimate(self.names, s, np.asarray(covariance, dtype=float), cost, float(np.sqrt(sigma2)), iterations, success, message)
 
     def direction(self, parameter: str, data_freq: Sequence[float] | None = None) -> Array:
         """How a change of any model parameter shows in the group log-factors: ``d s / d ln parameter``.

@@ -1,0 +1,278 @@
+"""The learned healthy state of a machine: what its component factors should be, and how much they scatter.
+
+A healthy machine's stiffness factors are not constant: the bearing preload, and with it the bearing stiffness,
+follows the spindle temperature. :func:`learn_baseline` therefore fits each component's log-factor over the
+healthy measurements as a quadratic polynomial in the recorded operating conditions (temperature, speed; none:
+a constant), and keeps the covariance of what is left. A new measurement is then judged by its *deviation*
+from the expectation at its own conditions, so that a warm machine is not taken for a faulty one.
+
+The charts standardize the deviations by ``sqrt(std^2 + resolution^2)``: FRF-based estimates are far more
+precise (1e-5 at 1 % FRF noise) than any model of a real machine is accurate, so the ``resolution`` (default
+0.5 %) sets the smallest change the monitoring treats as real.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cappe.exceptions import DataError
+from cappe.systems.frf import FRFData
+
+__all__ = ["BASELINE_FORMAT", "Baseline", "learn_baseline"]
+
+BASELINE_FORMAT = "cappe.monitor-baseline/1"
+
+Array = NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """Healthy expectation and scatter of the component log-factors.
+
+    Attributes
+    ----------
+    names : tuple of str
+        Components.
+    conditions : tuple of str
+        Operating conditions the expectation depends on (may be empty).
+    center, spread : ndarray, shape (n_cond,)
+        Centre and half-range of each condition over the healthy data (the polynomial's variable is
+        ``(c - center) / spread``).
+    coefficients : ndarray, shape (1 + 2 n_cond, n)
+        Constant, linear and quadratic terms of each component's expected log-factor.
+    covariance : ndarray, shape (n, n)
+        Covariance of the healthy deviations.
+    resolution : float
+        Smallest relative change treated as real (adds to the charts' standard deviation).
+    n_measurements : int
+        Healthy measurements learned from.
+    measurement_ids : tuple of int
+        Their ids in the history store (empty when learned outside one).
+    frf : dict, optional
+        Mean complex FRF of the healthy measurements on their common lines.
+    features : dict
+        Mean and standard deviation of every scalar feature.
+    map : dict, optional
+        Frequency-damping map over the preload (thesis Fig. 5.30) for the dashboard.
+    created : str
+        ISO time of learning.
+    """
+
+    names: tuple[str, ...]
+    conditions: tuple[str, ...]
+    center: Array
+    spread: Array
+    coefficients: Array
+    covariance: Array
+    resolution: float = 0.005
+    n_measurements: int = 0
+    measurement_ids: tuple[int, ...] = ()
+    frf: dict[str, Any] | None = None
+    features: dict[str, tuple[float, float]] = field(default_factory=dict)
+    map: dict[str, Any] | None = None
+    created: str = ""
+
+    def _design(self, conditions: Mapping[str, float] | None) -> Array:
+        values = []
+        for name in self.conditions:
+            if conditions is None or name not in conditions:
+                msg = (f"the baseline depends on the operating condition '{name}', which the measurement does not "
+                       f"give (conditions {dict(conditions or {})})")
+                raise DataError(msg)
+            values.append(float(conditions[name]))
+        x = (np.asarray(values, dtype=float) - self.center) / self.spread
+        return np.concatenate([[1.0], x, x**2])
+
+    def expected(self, conditions: Mapping[str, float] | None = None) -> Array:
+        """Expected healthy log-factors at these operating conditions."""
+        return np.asarray(self._design(conditions) @ self.coefficients, dtype=float)
+
+    def deviation(self, log_factor: ArrayLike, conditions: Mapping[str, float] | None = None) -> Array:
+        """Log-factors minus their healthy expectation."""
+        return np.asarray(log_factor, dtype=float) - self.expected(conditions)
+
+    @property
+    def std(self) -> Array:
+        """Healthy standard deviation of each log-factor."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    @property
+    def scale(self) -> Array:
+        """The charts' standard deviation: ``sqrt(std^2 + resolution^2)``."""
+        return np.sqrt(self.std**2 + self.resolution**2)
+
+    @property
+    def chart_covariance(self) -> Array:
+        """Covariance of the deviations as the charts and the diagnosis see it (resolution added)."""
+        return np.asarray(self.covariance + self.resolution**2 * np.eye(len(self.names)), dtype=float)
+
+    def to_dict(self) -> dict[str, Any]:
+        mean = np.exp(self.coefficients[0])
+        return {
+            "format": BASELINE_FORMAT,
+            "created": self.created,
+            "n_measurements": self.n_measurements,
+            "measurement_ids": list(self.measurement_ids),
+            "names": list(self.names),
+            "conditions": list(self.conditions),
+            "center": self.center.tolist(),
+            "spread": self.spread.tolist(),
+            "coefficients": self.coefficients.tolist(),
+            "covariance": self.covariance.tolist(),
+            "resolution": self.resolution,
+            # the view for people and the dashboard: factors at the centre of the conditions
+            "mean": {n: float(v) for n, v in zip(self.names, mean, strict=True)},
+            "std": {n: float(m * s) for n, m, s in zip(self.names, mean, self.std, strict=True)},
+            "limits": {n: [float(m * np.exp(-3 * s)), float(m * np.exp(3 * s))]
+                       for n, m, s in zip(self.names, mean, self.scale, strict=True)},
+            "features": {k: list(v) for k, v in self.features.items()},
+            "frf": self.frf,
+            "map": self.map,
+        }
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any]) -> Baseline:
+        if data.get("format") != BASELINE_FORMAT:
+            msg = f"baseline format must be {BASELINE_FORMAT!r}; got {data.get('format')!r}"
+            raise DataError(msg)
+        try:
+            return cls(
+                names=tuple(data["names"]),
+                conditions=tuple(data["conditions"]),
+                center=np.asarray(data["center"], dtype=float),
+                spread=np.asarray(data["spread"], dtype=float),
+                coefficients=np.asarray(data["coefficients"], dtype=float).reshape(-1, len(data["names"])),
+                covariance=np.asarray(data["covariance"], dtype=float),
+                resolution=float(data["resolution"]),
+                n_measurements=int(data["n_measurements"]),
+                measurement_ids=tuple(int(i) for i in data.get("measurement_ids", [])),
+                frf=data.get("frf"),
+                features={k: (float(v[0]), float(v[1])) for k, v in data.get("features", {}).items()},
+                map=data.get("map"),
+                created=str(data.get("created", "")),
+            )
+        except (KeyError, TypeError, ValueError) as exc:
+            msg = f"baseline is malformed: {type(exc).__name__} {exc}"
+            raise DataError(msg) from exc
+
+    def frf_data(self) -> FRFData | None:
+        """The mean healthy FRF."""
+        if not self.frf:
+            return None
+        H = np.asarray(self.frf["re"]) + 1j * np.asarray(self.frf["im"])
+        return FRFData(np.asarray(self.frf["freq"], dtype=float), H, tuple(self.frf["input_names"]),
+                       tuple(self.frf["output_names"]))
+
+
+def _mean_frf(frfs: Sequence[FRFData]) -> dict[str, Any] | None:
+    first = frfs[0]
+    same = all(f.freq.shape == first.freq.shape and np.allclose(f.freq, first.freq)
+               and f.input_names == first.input_names and f.output_names == first.output_names for f in frfs)
+    if not same:
+        return None
+    H = np.mean([np.asarray(f.H) for f in frfs], axis=0)
+    return {"freq": first.freq.tolist(), "input_names": list(first.input_names),
+            "output_names": list(first.output_names), "re": H.real.tolist(), "im": H.imag.tolist(),
+            "magnitude": np.abs(H).tolist()}
+
+
+def learn_baseline(
+    log_factors: Array,
+    *,
+    names: Sequence[str],
+    conditions: Sequence[Mapping[str, float]] | None = None,
+    frfs: Sequence[FRFData] | None = None,
+    features: Sequence[Mapping[str, float]] | None = None,
+    resolution: float = 0.005,
+    measurement_ids: Sequence[int] = (),
+    preload_map: Mapping[str, Any] | None = None,
+) -> Baseline:
+    """Learn a :class:`Baseline` from healthy measurements.
+
+    Parameters
+    ----------
+    log_factors : ndarray, shape (N, n)
+        Estimated log-factors of the healthy measurements.
+    names : sequence of str
+        Component names (n).
+    conditions : sequence of mapping, optional
+        Operating conditions of each measurement; those every measurement gives, and that vary, become
+        regressors (a quadratic in each).
+    frfs : sequence of FRFData, optional
+        The healthy FRFs (their mean is kept when they share their lines).
+    features : sequence of mapping, optional
+        Scalar features of each measurement (NaN = missing).
+    resolution : float
+        See the module notes.
+    measurement_ids : sequence of int
+    preload_map : mapping, optional
+
+    Raises
+    ------
+    DataError
+        With fewer measurements than ``3 (1 + 2 n_cond)``, or non-finite log-factors.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> t = rng.uniform(18, 26, 60)
+    >>> s = np.column_stack([0.01 * (t - 22) + 1e-4 * rng.standard_normal(60), 1e-4 * rng.standard_normal(60)])
+    >>> b = learn_baseline(s, names=["front", "rear"], conditions=[{"temperature": v} for v in t])
+    >>> np.round(b.expected({"temperature": 25.0}), 3).tolist()
+    [0.03, 0.0]
+    """
+    s = np.asarray(log_factors, dtype=float)
+    n_meas = s.shape[0] if s.ndim == 2 else 0
+    if s.ndim != 2 or s.shape[1] != len(names) or not np.all(np.isfinite(s)):
+        msg = f"baseline log-factors must be a finite (N, {len(names)}) array; got shape {s.shape}"
+        raise DataError(msg)
+    conds = list(conditions) if conditions is not None else [{}] * n_meas
+    if len(conds) != n_meas:
+        msg = f"baseline: {n_meas} measurements but {len(conds)} condition records"
+        raise DataError(msg)
+    common = sorted(set.intersection(*(set(c) for c in conds))) if conds else []
+    values = np.array([[float(c[k]) for k in common] for c in conds], dtype=float).reshape(n_meas, len(common))
+    varying = [j for j in range(len(common)) if np.ptp(values[:, j]) > 0]
+    names_c = tuple(common[j] for j in varying)
+    values = values[:, varying]
+    needed = 3 * (1 + 2 * len(names_c))
+    if n_meas < needed:
+        msg = (f"a baseline with {len(names_c)} operating condition(s) {list(names_c)} needs at least {needed} "
+               f"healthy measurements; got {n_meas}")
+        raise DataError(msg)
+    center = values.mean(axis=0) if names_c else np.zeros(0)
+    spread = np.ptp(values, axis=0) / 2 if names_c else np.zeros(0)
+    x = (values - center) / spread if names_c else values
+    design = np.column_stack([np.ones(n_meas), x, x**2])
+    coefficients, *_ = np.linalg.lstsq(design, s, rcond=None)
+    residual = s - design @ coefficients
+    dof = max(n_meas - design.shape[1], 1)
+    covariance = residual.T @ residual / dof
+    feature_stats: dict[str, tuple[float, float]] = {}
+    if features:
+        for key in sorted({k for f in features for k in f}):
+            column = np.array([float(f.get(key, np.nan)) for f in features])
+            column = column[np.isfinite(column)]
+            if column.size:
+                feature_stats[key] = (float(column.mean()), float(column.std(ddof=1)) if column.size > 1 else 0.0)
+    return Baseline(
+        names=tuple(names),
+        conditions=names_c,
+        center=center,
+        spread=spread,
+        coefficients=coefficients,
+        covariance=covariance,
+        resolution=float(resolution),
+        n_measurements=n_meas,
+        measurement_ids=tuple(int(i) for i in measurement_ids),
+        frf=_mean_frf(frfs) if frfs else None,
+        features=feature_stats,
+        map=dict(preload_map) if preload_map else None,
+        created=datetime.now(UTC).isoformat(),
+    )

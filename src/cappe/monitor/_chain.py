@@ -1,0 +1,462 @@
+"""The monitoring chain of thesis Fig. 1.1 for one machine: measurement -> features -> parameters -> detection ->
+diagnosis -> severity, and its bookkeeping in the history store.
+
+:class:`Monitor` holds the compiled model and the estimators of a :class:`MonitorConfig`; it is stateless
+between measurements (the detector state travels through the store). Per measurement:
+
+1. **Pre-processing.** Time data become H1 FRFs of the configured channels (:func:`cappe.identify.estimate_frf`);
+   FRFs are used as they are.
+2. **Features.** Modal frequency and damping of every mode in the band (:func:`modal_features`), FRAC and CSF
+   against the healthy mean FRF (:func:`frf_features`).
+3. **Parameters.** Fast path on every measurement: the component stiffness factors by the FRF fit of
+   :class:`FactorEstimator` (milliseconds to a few tenths of a second). Slow path every ``slow_every``
+   measurements and after every alarm: every stiffness parameter of every component freed on its own, started
+   from the fast path (the full estimation).
+4. **Detection.** Deviations of the log-factors from the baseline's expectation at the measurement's operating
+   conditions feed the CUSUM or EWMA charts (:class:`SequentialDetector`).
+5. **Diagnosis.** A chart beyond its limit starts a diagnosis of the change since the chart's change point
+   among the single-fault hypotheses: every component, and every fault parameter (``preload``) through its
+   signature in the factors (:func:`diagnose`).
+6. **Severity.** The diagnosed change is graded. An alarm is raised once per diagnosed fault and again only
+   when its grade worsens (a loosening screw goes from conditionally tolerable to intolerable); it clears when
+   the charts of the components involved come back to their healthy state.
+"""
+
+from __future__ import annotations
+
+import warnings
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from datetime import datetime
+from typing import Any
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+from cappe.exceptions import DataError
+from cappe.io.timedata import TimeData
+from cappe.model import NumericModel, load_model
+from cappe.monitor._baseline import Baseline, learn_baseline
+from cappe.monitor._config import MonitorConfig
+from cappe.monitor._detection import ChartSignal, SequentialDetector
+from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose, severity_rank
+from cappe.monitor._estimation import FactorEstimate, FactorEstimator
+from cappe.monitor._features import frf_features, modal_features
+from cappe.systems.frf import FRFData
+
+__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "ingest", "learn_store_baseline", "register_machine"]
+
+Array = NDArray[np.float64]
+
+#: Modes of the frequency-damping map kept with the baseline (thesis Fig. 5.30 shows the first ones).
+MAP_MODES = (1, 2, 3)
+
+
+@dataclass(frozen=True)
+class Analysis:
+    """Features and parameter estimates of one measurement (steps 1-3).
+
+    Attributes
+    ----------
+    estimate : FactorEstimate
+        Fast path: the component factors.
+    frequency, damping : ndarray, shape (m,)
+        Modal features of the model's modes in the band (NaN: not found).
+    frac, csf : float or None
+        FRF correlation with the healthy mean FRF (None before a baseline exists).
+    slow : FactorEstimate or None
+        Slow path, when it ran.
+    notes : tuple of str
+        What went wrong on the way, for the record.
+    """
+
+    estimate: FactorEstimate
+    frequency: Array
+    damping: Array
+    frac: float | None = None
+    csf: float | None = None
+    slow: FactorEstimate | None = None
+    notes: tuple[str, ...] = ()
+
+    def features(self) -> dict[str, tuple[float, float | None]]:
+        """Scalar features as the history store keeps them: name -> (value, std)."""
+        out: dict[str, tuple[float, float | None]] = {}
+        for k, (f, z) in enumerate(zip(self.frequency, self.damping, strict=True), start=1):
+            if np.isfinite(f):
+                out[f"freq_{k}"] = (float(f), None)
+                out[f"zeta_{k}"] = (float(z), None)
+        if self.frac is not None:
+            out["frac"] = (self.frac, None)
+        if self.csf is not None:
+            out["csf"] = (self.csf, None)
+        return out
+
+    def feature_values(self) -> dict[str, float]:
+        return {k: v for k, (v, _) in self.features().items()}
+
+
+@dataclass(frozen=True)
+class Alarm:
+    """A raised alarm (steps 4-6)."""
+
+    component: str
+    statistic: str
+    value: float
+    severity: str
+    diagnosis: Diagnosis
+    message: str
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"component": self.component, "statistic": self.statistic, "value": self.value,
+                "severity": self.severity, "diagnosis": self.diagnosis.to_dict(), "message": self.message}
+
+
+@dataclass(frozen=True)
+class IngestResult:
+    """What :func:`ingest` recorded for one measurement."""
+
+    measurement_id: int
+    analysis: Analysis
+    deviation: Array | None
+    alarms: tuple[Alarm, ...]
+    active: dict[str, str] = field(default_factory=dict)
+
+    def to_dict(self) -> dict[str, Any]:
+        names = self.analysis.estimate.names
+        return {
+            "measurement_id": self.measurement_id,
+            "factors": dict(zip(names, self.analysis.estimate.factor.tolist(), strict=True)),
+            "std": dict(zip(names, self.analysis.estimate.std.tolist(), strict=True)),
+            "deviation": None if self.deviation is None else dict(zip(names, self.deviation.tolist(), strict=True)),
+            "features": self.analysis.feature_values(),
+            "alarms": [a.to_dict() for a in self.alarms],
+            "active": dict(self.active),
+            "notes": list(self.analysis.notes),
+        }
+
+
+class Monitor:
+    """The monitoring chain of one machine (see the module notes).
+
+    Parameters
+    ----------
+    config : MonitorConfig
+    model : NumericModel, optional
+        The compiled model of ``config.model`` (compiled here when not given).
+    """
+
+    def __init__(self, config: MonitorConfig, model: NumericModel | None = None) -> None:
+        self.config = config
+        self.model = model if model is not None else NumericModel(load_model(config.model))
+        config.check_model(self.model)
+        self.estimator = self._estimator({c.name: c.parameters for c in config.components})
+        self._slow_groups = [(c.name, p) for c in config.components for p in c.parameters]
+        self.slow_estimator = self._estimator({p: [p] for _, p in self._slow_groups})
+        modes = self.model.system(self.model.vector(dict(config.params)), config.position).modes("exact")
+        inside = (modes.frequency >= config.band[0]) & (modes.frequency <= config.band[1])
+        self.mode_numbers = tuple(int(k) + 1 for k in np.flatnonzero(inside))
+        self._hypotheses: list[FaultHypothesis] | None = None
+
+    def _estimator(self, groups: Mapping[str, Sequence[str]]) -> FactorEstimator:
+        c = self.config
+        return FactorEstimator(self.model, groups, reference=c.params, position=c.position, inputs=c.inputs,
+                               outputs=c.outputs, band=c.band, noise_floor=c.noise_floor)
+
+    # -- steps 1-3 -----------------------------------------------------------------------------------------
+    def prepare(self, data: FRFData | TimeData, *, nperseg: int | None = None) -> FRFData:
+        """Pre-processing: time data to H1 FRFs of the configured channels; FRFs pass unchanged."""
+        if isinstance(data, FRFData):
+            return data
+        from cappe.identify import estimate_frf
+
+        lo, hi = self.config.band
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # low-coherence lines are left to the fit's weights
+            return estimate_frf(data, inputs=list(self.config.inputs), outputs=list(self.config.outputs),
+                                nperseg=nperseg, band=(0.0, min(hi * 1.2, data.fs / 2)))
+
+    def expected_modes(self, log_factor: Array) -> Array:
+        """Natural frequencies (Hz) of the monitored modes of the model at these component factors."""
+        p = self.estimator.parameters(log_factor)
+        freq = self.model.system(p, self.config.position).modes("exact").frequency
+        return np.asarray(freq[[k - 1 for k in self.mode_numbers]], dtype=float)
+
+    def analyse(
+        self,
+        data: FRFData | TimeData,
+        *,
+        baseline: Baseline | None = None,
+        start: ArrayLike | None = None,
+        slow: bool = False,
+        modal: bool = True,
+    ) -> Analysis:
+        """Steps 1-3 for one measurement: features and the component factors (and the slow path if asked)."""
+        frf = self.prepare(data)
+        if start is None and baseline is not None:
+            start = baseline.coefficients[0]
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            estimate = self.estimator.fit(frf, start)
+        notes = [f"fast path: {w.message}" for w in caught]
+        freq = damp = np.full(len(self.mode_numbers), np.nan)
+        if modal:
+            freq, damp, modal_notes = modal_features(frf, band=self.config.band,
+                                                     expected=self.expected_modes(estimate.log_factor),
+                                                     max_order=self.config.max_order)
+            notes.extend(modal_notes)
+        frac_value = csf_value = None
+        healthy = baseline.frf_data() if baseline is not None else None
+        if healthy is not None:
+            try:
+                frac_value, csf_value = frf_features(frf, healthy)
+            except DataError as exc:
+                notes.append(f"FRF features: {exc}")
+        slow_estimate = self.slow_path(frf, estimate) if slow else None
+        return Analysis(estimate, freq, damp, frac_value, csf_value, slow_estimate, tuple(notes))
+
+    def slow_path(self, frf: FRFData, fast: FactorEstimate) -> FactorEstimate:
+        """The full estimation: every stiffness parameter of every component on its own, from the fast path."""
+        index = {name: k for k, name in enumerate(fast.names)}
+        start = np.array([fast.log_factor[index[comp]] for comp, _ in self._slow_groups])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")  # a weakly identifiable single parameter is reported, not raised
+            return self.slow_estimator.fit(frf, start)
+
+    # -- baseline ------------------------------------------------------------------------------------------
+    def learn_baseline(
+        self,
+        analyses: Sequence[Analysis],
+        *,
+        conditions: Sequence[Mapping[str, float]] | None = None,
+        frfs: Sequence[FRFData] | None = None,
+        resolution: float = 0.005,
+        measurement_ids: Sequence[int] = (),
+    ) -> Baseline:
+        """A :class:`Baseline` from healthy analyses, with the mean FRF and the preload map for the dashboard."""
+        if not analyses:
+            msg = f"machine '{self.config.machine}': a baseline needs healthy measurements; got none"
+            raise DataError(msg)
+        band_frfs = None
+        if frfs:
+            band_frfs = [self._band(f) for f in frfs]
+        return learn_baseline(
+            np.array([a.estimate.log_factor for a in analyses]),
+            names=self.estimator.names,
+            conditions=conditions,
+            frfs=band_frfs,
+            features=[a.feature_values() for a in analyses],
+            resolution=resolution,
+            measurement_ids=measurement_ids,
+            preload_map=self._preload_map(),
+        )
+
+    def _band(self, frf: FRFData) -> FRFData:
+        freq, h = self.estimator.select(frf)
+        return FRFData(freq, h, self.config.inputs, self.config.outputs)
+
+    def _preload_map(self) -> dict[str, Any] | None:
+        if "preload" not in self.config.fault_parameters:
+            return None
+        from cappe.monitor._preload import THESIS_PRELOADS, preload_map
+
+        modes = tuple(m for m in MAP_MODES if m <= self.model.n_dof)
+        result = preload_map(self.model, THESIS_PRELOADS, modes, params=dict(self.config.params),
+                             position=self.config.position)
+        return {"parameter": "preload", **result.to_dict()}
+
+    # -- steps 4-6 -----------------------------------------------------------------------------------------
+    def hypotheses(self) -> list[FaultHypothesis]:
+        """One hypothesis per component and per fault parameter (its signature in the factors)."""
+        if self._hypotheses is None:
+            names = self.estimator.names
+            hyps = []
+            for k, comp in enumerate(self.config.components):
+                direction = np.zeros(len(names))
+                direction[k] = 1.0
+                hyps.append(FaultHypothesis(comp.name, comp.label, direction, self.config.thresholds(comp.name),
+                                            (comp.name,)))
+            for name in self.config.fault_parameters:
+                direction = self.estimator.direction(name)
+                moved = tuple(n for n, d in zip(names, direction, strict=True)
+                              if abs(d) >= 0.1 * np.max(np.abs(direction)))
+                hyps.append(FaultHypothesis(name, f"bearing {name}" if name == "preload" else name, direction,
+                                            self.config.thresholds(name), moved))
+            self._hypotheses = hyps
+        return self._hypotheses
+
+    def detector(self, baseline: Baseline) -> SequentialDetector:
+        if tuple(baseline.names) != self.estimator.names:
+            msg = (f"baseline components {list(baseline.names)} differ from the machine's "
+                   f"{list(self.estimator.names)}; learn a new baseline")
+            raise DataError(msg)
+        return SequentialDetector(self.estimator.names, baseline.scale, method=self.config.detection,
+                                  false_alarm_rate=self.config.false_alarm_rate, shift=self.config.shift,
+                                  lam=self.config.ewma_lambda)
+
+    def step(
+        self,
+        state: Mapping[str, Any] | None,
+        analysis: Analysis,
+        conditions: Mapping[str, float] | None,
+        baseline: Baseline,
+    ) -> tuple[dict[str, Any], Array, list[Alarm]]:
+        """Steps 4-6: update the charts, diagnose and grade what they signal, apply the alarm policy.
+
+        Returns the new state (JSON-ready), the deviation of the log-factors and the alarms to raise.
+        """
+        detector = self.detector(baseline)
+        if state is None or state.get("baseline") != baseline.created:
+            state = {"baseline": baseline.created, "detector": None, "active": {}, "count": 0}
+        deviation = baseline.deviation(analysis.estimate.log_factor, conditions)
+        chart_state, signals = detector.update(state["detector"], deviation)
+        active: dict[str, str] = dict(state["active"])
+        hyps = {h.name: h for h in self.hypotheses()}
+        # clear faults whose components have all come back
+        for name in list(active):
+            if all(detector.in_control(chart_state, c) for c in hyps[name].components):
+                del active[name]
+        best: dict[str, tuple[ChartSignal, Diagnosis]] = {}
+        for signal in signals:
+            # which fault: from the mean change since the change point (averages the noise of the run); how
+            # large: from this measurement's deviation along that fault (a drifting fault has grown since)
+            chosen = diagnose(signal.change, baseline.chart_covariance / signal.change_weight, list(hyps.values()))
+            now = diagnose(deviation, baseline.chart_covariance, [hyps[chosen.hypothesis]])
+            diagnosis = replace(chosen, change=now.change, change_std=now.change_std, severity=now.severity)
+            held = best.get(diagnosis.hypothesis)
+            if held is None or signal.statistic > held[0].statistic:
+                best[diagnosis.hypothesis] = (signal, diagnosis)
+        alarms = []
+        for name, (signal, diagnosis) in best.items():
+            if severity_rank(diagnosis.severity) <= severity_rank(active.get(name)):
+                continue
+            escalated = name in active
+            active[name] = diagnosis.severity
+            statistic = f"{detector.method}{signal.side}"
+            what = "worse" if escalated else "detected"
+            message = (f"{what}: {diagnosis.text()}; {statistic} chart of '{signal.name}' at "
+                       f"{signal.statistic:.3g} > {signal.limit:.3g}"
+                       + (f" after {signal.run} measurement(s)" if signal.run else ""))
+            alarms.append(Alarm(name, statistic, signal.statistic, diagnosis.severity, diagnosis, message))
+        new_state = {"baseline": baseline.created, "detector": chart_state, "active": active,
+                     "count": int(state["count"]) + 1}
+        return new_state, deviation, alarms
+
+
+# -- the history store ----------------------------------------------------------------------------------------
+def register_machine(store: Any, config: MonitorConfig, *, replace: bool = False) -> None:
+    """Record a machine's config in a history store (checked against its model first)."""
+    Monitor(config)  # compiles the model and checks every name
+    store.add_machine(config.machine, config.to_dict(), replace=replace)
+
+
+def _monitor_for(store: Any, machine: str, monitor: Monitor | None) -> Monitor:
+    if monitor is not None:
+        if monitor.config.machine != machine:
+            msg = f"the monitor is for machine '{monitor.config.machine}', not '{machine}'"
+            raise DataError(msg)
+        return monitor
+    return Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
+
+
+def ingest(
+    store: Any,
+    machine: str,
+    data: FRFData | TimeData,
+    *,
+    timestamp: datetime,
+    source: str,
+    conditions: Mapping[str, float] | None = None,
+    monitor: Monitor | None = None,
+    keep_frf: bool = True,
+) -> IngestResult:
+    """Run the chain on one measurement and record everything in one transaction.
+
+    The heavy steps (features, estimation) run before the transaction; detection, diagnosis and the record run
+    inside it, under the store's per-machine lock, so concurrent ingests continue each other's charts. When
+    an alarm is raised, or every ``slow_every`` measurements, the slow path runs afterwards and adds its
+    estimates to the same measurement.
+    """
+    mon = _monitor_for(store, machine, monitor)
+    baseline_doc = store.baseline(machine)
+    baseline = Baseline.from_dict(baseline_doc) if baseline_doc else None
+    frf = mon.prepare(data)
+    analysis = mon.analyse(frf, baseline=baseline)
+    names = analysis.estimate.names
+    kind = "frf" if isinstance(data, FRFData) else "time"
+    deviation = None
+    alarms: list[Alarm] = []
+    fit_meta = {"success": analysis.estimate.success, "sigma": analysis.estimate.sigma,
+                "iterations": analysis.estimate.iterations}
+    with store.transaction(machine) as tx:
+        state = tx.state()
+        mid = tx.add_measurement(timestamp=timestamp, source=source, kind=kind, conditions=dict(conditions or {}),
+                                 frf=mon._band(frf) if keep_frf else None,
+                                 meta={"notes": list(analysis.notes), "fit": fit_meta})
+        tx.add_features(mid, analysis.features())
+        tx.add_estimates(mid, path="fast", values=dict(zip(names, analysis.estimate.factor.tolist(), strict=True)),
+                         std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
+        if baseline is not None:
+            state, deviation, alarms = mon.step(state, analysis, conditions, baseline)
+            for alarm in alarms:
+                tx.add_alarm(mid, component=alarm.component, statistic=alarm.statistic, value=alarm.value,
+                             severity=alarm.severity, diagnosis=alarm.diagnosis.to_dict(), message=alarm.message)
+            tx.set_state(state)
+        count = int((state or {}).get("count", 0))
+    every = mon.config.slow_every
+    if alarms or (every and baseline is not None and count % every == 0):
+        slow = mon.slow_path(frf, analysis.estimate)
+        with store.transaction(machine) as tx:
+            tx.add_estimates(mid, path="slow", values=dict(zip(slow.names, slow.factor.tolist(), strict=True)),
+                             std=dict(zip(slow.names, slow.std.tolist(), strict=True)))
+        analysis = Analysis(analysis.estimate, analysis.frequency, analysis.damping, analysis.frac, analysis.csf,
+                            slow, analysis.notes)
+    return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})))
+
+
+def learn_store_baseline(
+    store: Any,
+    machine: str,
+    *,
+    first: int | None = None,
+    since: datetime | None = None,
+    until: datetime | None = None,
+    resolution: float = 0.005,
+    monitor: Monitor | None = None,
+) -> Baseline:
+    """Learn the healthy baseline from recorded measurements (the first ``first``, or those in a time range),
+    store it, and restart the detector state."""
+    mon = _monitor_for(store, machine, monitor)
+    records = store.measurements(machine, since=since, until=until)
+    if first is not None:
+        records = records[:first]
+    if not records:
+        msg = f"machine '{machine}' has no recorded measurements in the chosen range to learn a baseline from"
+        raise DataError(msg)
+    ids = [r.id for r in records]
+    table = store.estimates(machine, path="fast")
+    table = table[table["measurement_id"].isin(ids)]
+    wide = table.pivot(index="measurement_id", columns="parameter", values="value")
+    names = list(mon.estimator.names)
+    missing = [n for n in names if n not in wide.columns]
+    if missing or len(wide) != len(ids):
+        msg = f"machine '{machine}': recorded fast-path estimates lack components {missing} or measurements"
+        raise DataError(msg)
+    log_factors = np.log(wide.loc[ids, names].to_numpy(dtype=float))
+    feats = store.features(machine)
+    feats = feats[feats["measurement_id"].isin(ids)]
+    per_measurement = [dict(zip(g["name"], g["value"], strict=True)) for _, g in feats.groupby("measurement_id")]
+    frfs = [f for f in (store.frf(i) for i in ids) if f is not None]
+    analyses_free = learn_baseline(
+        log_factors,
+        names=names,
+        conditions=[r.conditions for r in records],
+        frfs=[mon._band(f) for f in frfs] if len(frfs) == len(ids) else None,
+        features=per_measurement,
+        resolution=resolution,
+        measurement_ids=ids,
+        preload_map=mon._preload_map(),
+    )
+    store.set_baseline(machine, analyses_free.to_dict())
+    with store.transaction(machine) as tx:
+        tx.set_state({"baseline": analyses_free.created, "detector": None, "active": {}, "count": 0})
+    return analyses_free
