@@ -1,7 +1,8 @@
 """Condition monitoring (thesis Fig. 1.1): the chain from a measurement to a graded diagnosis, its history store
 and dashboard, and the bearing-preload studies behind it.
 
-- machine description: :class:`MonitorConfig` (components = stiffness groups that fail together), :func:`default_config`;
+- machine description: :class:`MonitorConfig` (components: stiffness groups that fail together),
+  :func:`default_config`;
 - chain: :class:`Monitor` (pre-processing, features, fast and slow parameter estimation, detection, diagnosis,
   severity), :func:`ingest`, :func:`learn_store_baseline`, :func:`register_machine`;
 - building blocks: :class:`FactorEstimator`, :func:`modal_features`, :func:`frf_features`, :class:`Baseline`,

@@ -224,7 +224,7 @@ def learn_baseline(
     >>> t = rng.uniform(18, 26, 60)
     >>> s = np.column_stack([0.01 * (t - 22) + 1e-4 * rng.standard_normal(60), 1e-4 * rng.standard_normal(60)])
     >>> b = learn_baseline(s, names=["front", "rear"], conditions=[{"temperature": v} for v in t])
-    >>> np.round(b.expected({"temperature": 25.0}), 3).tolist()
+    >>> [round(float(v), 3) + 0.0 for v in b.expected({"temperature": 25.0})]
     [0.03, 0.0]
     """
     s = np.asarray(log_factors, dtype=float)
