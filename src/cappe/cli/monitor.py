@@ -1,4 +1,5 @@
-"""``cappe monitor preload``: how a model's modes and FRFs move with the bearing preload (thesis 5.4.3)."""
+"""``cappe monitor``: the monitoring chain over a history store (init, simulate, ingest, baseline, status, history,
+alarms, serve) and the bearing-preload studies (preload, bearing-test)."""
 
 from __future__ import annotations
 
@@ -8,11 +9,14 @@ from typing import Any
 import numpy as np
 
 from cappe.cli._common import ModelContext, UsageError, add_model_options, band, emit, names
+from cappe.cli._monitor_chain import register as _register_chain
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    parser = sub.add_parser("monitor", help="condition monitoring: preload studies")
+    parser = sub.add_parser("monitor", help="condition monitoring: history store, detection, diagnosis, dashboard; "
+                                           "preload studies")
     cmds = parser.add_subparsers(dest="monitor_command", metavar="COMMAND", required=True)
+    _register_chain(cmds)
     p = cmds.add_parser(
         "preload",
         help="frequency-damping map over preload, FRFs at 75/100/125 %%, which sensor sees which mode",

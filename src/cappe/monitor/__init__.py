@@ -7,6 +7,7 @@ and dashboard, and the bearing-preload studies behind it.
   severity), :func:`ingest`, :func:`learn_store_baseline`, :func:`register_machine`;
 - building blocks: :class:`FactorEstimator`, :func:`modal_features`, :func:`frf_features`, :class:`Baseline`,
   :class:`SequentialDetector` (CUSUM / EWMA designed by ARL), :func:`diagnose` with :class:`FaultHypothesis`;
+- history: :class:`HistoryStore` (SQLite or PostgreSQL), dashboard: :func:`make_server`;
 - data: :func:`simulate_scenario` (healthy drift, bearing loss, loosening screw, preload loss);
 - preload studies: :func:`preload_map`, :func:`preload_frfs`, :func:`sensor_visibility`, and the quasi-static
   bearing stiffness test :func:`static_bearing_stiffness`.
@@ -23,6 +24,7 @@ from cappe.monitor._config import (
     default_components,
     default_config,
 )
+from cappe.monitor._dashboard import DashboardServer, make_server
 from cappe.monitor._detection import (
     ChartSignal,
     SequentialDetector,
@@ -44,24 +46,39 @@ from cappe.monitor._scenario import (
     write_scenario,
 )
 from cappe.monitor._static import StaticBearingTest, static_bearing_stiffness
+from cappe.monitor._store import (
+    SCHEMA_VERSION,
+    AlarmRecord,
+    HistoryStore,
+    IngestTransaction,
+    MeasurementRecord,
+    decode_frf,
+    encode_frf,
+)
 
 __all__ = [
     "BASELINE_FORMAT",
+    "SCHEMA_VERSION",
     "CONFIG_FORMAT",
     "SCENARIOS",
     "SCENARIO_FORMAT",
     "SEVERITY_GRADES",
     "THESIS_PRELOADS",
     "Alarm",
+    "AlarmRecord",
     "Analysis",
     "Baseline",
     "ChartSignal",
     "Component",
+    "DashboardServer",
     "Diagnosis",
     "FactorEstimate",
     "FactorEstimator",
     "FaultHypothesis",
+    "HistoryStore",
+    "IngestTransaction",
     "IngestResult",
+    "MeasurementRecord",
     "Monitor",
     "MonitorConfig",
     "PreloadMap",
@@ -71,15 +88,18 @@ __all__ = [
     "StaticBearingTest",
     "cusum_arl",
     "cusum_limit",
+    "decode_frf",
     "default_components",
     "default_config",
     "diagnose",
+    "encode_frf",
     "ewma_arl",
     "ewma_limit",
     "frf_features",
     "ingest",
     "learn_baseline",
     "learn_store_baseline",
+    "make_server",
     "modal_features",
     "preload_frfs",
     "preload_map",

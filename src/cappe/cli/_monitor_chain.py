@@ -1,0 +1,351 @@
+"""The monitoring-chain commands of ``cappe monitor`` (thesis Fig. 1.1 over a history store).
+
+``init`` records a machine (model, channels, components, alarm rules); ``simulate`` writes scenario data;
+``ingest`` runs the chain on measurement files; ``baseline`` learns the healthy state from recorded
+measurements; ``status``, ``history`` and ``alarms`` read the store; ``serve`` starts the dashboard.
+"""
+
+from __future__ import annotations
+
+import argparse
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+from cappe.cli._common import ModelContext, UsageError, emit, names, number_pairs, text_pairs
+from cappe.cli._common import band as parse_band
+
+__all__ = ["register"]
+
+
+def _store_options(p: argparse.ArgumentParser, *, machine: bool = True) -> None:
+    p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL "
+                                                   "(postgresql+psycopg://user@host/db)")
+    if machine:
+        p.add_argument("--machine", required=True, help="machine id")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+
+
+def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
+    p = cmds.add_parser("init", help="record a machine: model, channels, components and alarm rules",
+                        description="Record a machine in a history store (created if missing). Components default "
+                                    "to the model's element groups (front_x/front_y/front_z -> front).")
+    _store_options(p)
+    p.add_argument("--model", required=True, help="model YAML file or builtin:NAME")
+    p.add_argument("--params", metavar="FILE.json", help="parameter values of the healthy reference")
+    p.add_argument("--set", dest="overrides", metavar="NAME=VALUE", action="append", default=[],
+                   help="override one reference parameter (repeatable)")
+    p.add_argument("--position", metavar="AXIS=VALUE", action="append", default=[], help="axis position")
+    p.add_argument("--inputs", metavar="LIST", help="measured inputs (default all)")
+    p.add_argument("--outputs", metavar="LIST", help="measured outputs (default all)")
+    p.add_argument("--band", metavar="LO:HI", help="analysis band in Hz (default 0.7 f1 to 1.1 f_last)")
+    p.add_argument("--component", metavar="NAME=P1,P2", action="append", default=[],
+                   help="a component and its stiffness parameters (repeatable; replaces the defaults)")
+    p.add_argument("--fault-parameter", metavar="NAME", action="append",
+                   help="a model parameter whose change is a diagnosis of its own (default: preload if present)")
+    p.add_argument("--detection", choices=("cusum", "ewma"), default="cusum")
+    p.add_argument("--false-alarm-rate", type=float, default=1e-3,
+                   help="expected false alarms per healthy measurement (default 0.001)")
+    p.add_argument("--shift", type=float, default=2.0, help="change in standard deviations to detect fastest")
+    p.add_argument("--severity", metavar="tolerable=F,intolerable=F",
+                   help="relative-change thresholds of the grades (default tolerable=0.05,intolerable=0.25)")
+    p.add_argument("--slow-every", type=int, default=0, help="run the full estimation every N measurements")
+    p.add_argument("--replace", action="store_true", help="replace an existing machine's config")
+    p.set_defaults(func=init)
+
+    p = cmds.add_parser("simulate", help="write realistic monitoring data: healthy drift or a fault",
+                        description="FRF files of a machine's channels with temperature-driven preload drift and "
+                                    "a fault (bearing-loss, loosening-screw, preload-loss), plus scenario.json.")
+    p.add_argument("scenario", choices=("healthy", "bearing-loss", "loosening-screw", "preload-loss"))
+    p.add_argument("--store", help="take the machine config from this store (with --machine)")
+    p.add_argument("--machine", default="machine", help="machine id")
+    p.add_argument("--model", help="model for a default config (without --store)")
+    p.add_argument("-n", "--count", type=int, default=200, help="measurements (default 200)")
+    p.add_argument("--fault-at", type=int, help="first faulty measurement (default count / 2)")
+    p.add_argument("--component", help="faulty component (default front / screw2)")
+    p.add_argument("--severity", type=float, help="fraction lost (default 0.1 / 0.5 / 0.4)")
+    p.add_argument("--noise", type=float, default=0.01, help="relative FRF noise (default 0.01)")
+    p.add_argument("--interval", type=float, default=15.0, help="minutes between measurements (default 15)")
+    p.add_argument("--start", help="ISO time of the first measurement (default 2026-01-05T06:00Z)")
+    p.add_argument("--format", choices=("uff", "csv", "npz"), default="uff", help="file format (default uff)")
+    p.add_argument("--seed", type=int, help="random seed")
+    p.add_argument("-o", "--out", dest="directory", required=True, metavar="DIR", help="output directory")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    p.set_defaults(func=simulate)
+
+    p = cmds.add_parser("ingest", help="run the chain on measurements and record everything",
+                        description="FRF or time-data files (UFF 58, CSV, npz): features, stiffness factors, "
+                                    "detection, diagnosis and severity, recorded in the store.")
+    _store_options(p)
+    p.add_argument("files", metavar="FILE", nargs="*", help="measurement files")
+    p.add_argument("--manifest", help="scenario.json from `cappe monitor simulate` (files, times, conditions)")
+    p.add_argument("--time", help="ISO time of a single FILE (default: the file's modification time)")
+    p.add_argument("--condition", metavar="NAME=VALUE", action="append", default=[],
+                   help="operating condition of the measurement, e.g. temperature=24.5 (repeatable)")
+    p.set_defaults(func=ingest)
+
+    p = cmds.add_parser("baseline", help="learn the healthy state from recorded measurements",
+                        description="Healthy expectation (quadratic in the recorded operating conditions) and "
+                                    "scatter of the component factors; restarts the detector.")
+    _store_options(p)
+    p.add_argument("--first", type=int, help="use the first N recorded measurements")
+    p.add_argument("--since", help="ISO time: from")
+    p.add_argument("--until", help="ISO time: to")
+    p.add_argument("--resolution", type=float, default=0.005,
+                   help="smallest relative change treated as real (default 0.005)")
+    p.set_defaults(func=baseline)
+
+    p = cmds.add_parser("status", help="latest factors, active alarms and worst severity per machine")
+    _store_options(p, machine=False)
+    p.add_argument("--machine", help="one machine (default all)")
+    p.set_defaults(func=status)
+
+    p = cmds.add_parser("history", help="estimates over time")
+    _store_options(p)
+    p.add_argument("--path", choices=("fast", "slow"), default="fast")
+    p.add_argument("--parameter", metavar="LIST", help="components or parameters (default all)")
+    p.add_argument("--last", type=int, help="only the last N measurements")
+    p.add_argument("--csv", metavar="FILE", help="write the table as CSV")
+    p.set_defaults(func=history)
+
+    p = cmds.add_parser("alarms", help="alarms with diagnosis and severity; acknowledge one")
+    _store_options(p)
+    p.add_argument("--all", action="store_true", help="also acknowledged alarms")
+    p.add_argument("--ack", type=int, metavar="ID", help="acknowledge alarm ID")
+    p.set_defaults(func=alarms)
+
+    p = cmds.add_parser("serve", help="the dashboard on a local web page")
+    _store_options(p, machine=False)
+    p.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1: this computer only)")
+    p.add_argument("--port", type=int, default=8050, help="port (default 8050; 0 picks a free one)")
+    p.set_defaults(func=serve)
+
+
+def _open(path: str, *, create: bool = False) -> Any:
+    from cappe.monitor import HistoryStore
+
+    if not create and "://" not in path and not Path(path).exists():
+        msg = f"history store {path} does not exist; create it with `cappe monitor init`"
+        raise UsageError(msg)
+    return HistoryStore(path)
+
+
+def _when(text: str, option: str) -> datetime:
+    try:
+        value = datetime.fromisoformat(text)
+    except ValueError as exc:
+        msg = f"{option} must be an ISO time like 2026-01-05T06:00:00+00:00; got {text!r}"
+        raise UsageError(msg) from exc
+    return value if value.tzinfo is not None else value.replace(tzinfo=UTC)
+
+
+def init(args: argparse.Namespace) -> int:
+    from cappe.monitor import Component, SeverityThresholds, default_config, register_machine
+
+    ns = argparse.Namespace(model=args.model, params=args.params, overrides=args.overrides, position=args.position)
+    ctx = ModelContext(ns)
+    components = None
+    if args.component:
+        pairs = text_pairs(args.component, "--component", "NAME=P1,P2")
+        components = [Component(k, k.replace("_", " "), tuple(names(v) or [])) for k, v in pairs.items()]
+    severity = SeverityThresholds(**number_pairs(names(args.severity) or [], "--severity")) if args.severity else None
+    settings: dict[str, Any] = {"detection": args.detection, "false_alarm_rate": args.false_alarm_rate,
+                                "shift": args.shift, "slow_every": args.slow_every}
+    if severity is not None:
+        settings["severity"] = severity
+    config = default_config(ctx.numeric, machine=args.machine, source=args.model, params=ctx.overrides,
+                            position=ctx.position if args.position else None, inputs=names(args.inputs),
+                            outputs=names(args.outputs), band=parse_band(args.band) if args.band else None,
+                            components=components, fault_parameters=args.fault_parameter, **settings)
+    with _open(args.store, create=True) as store:
+        register_machine(store, config, replace=args.replace)
+    lines = [f"machine '{config.machine}' recorded in {args.store}: model {config.model}, "
+             f"{len(config.inputs)} inputs x {len(config.outputs)} outputs, band {config.band[0]:g}-"
+             f"{config.band[1]:g} Hz, {config.detection} at {config.false_alarm_rate:g} false alarms per measurement",
+             "components:"]
+    lines += [f"  {c.name:10s} {c.label:20s} {', '.join(c.parameters)}" for c in config.components]
+    if config.fault_parameters:
+        lines.append(f"fault parameters: {', '.join(config.fault_parameters)}")
+    emit(args, config.to_dict(), "\n".join(lines))
+    return 0
+
+
+def simulate(args: argparse.Namespace) -> int:
+    from datetime import timedelta
+
+    from cappe.model import NumericModel, load_model
+    from cappe.monitor import MonitorConfig, default_config, simulate_scenario, write_scenario
+
+    if args.store:
+        with _open(args.store) as store:
+            config = MonitorConfig.from_dict(store.machine_config(args.machine))
+        model = NumericModel(load_model(config.model))
+    elif args.model:
+        model = NumericModel(load_model(args.model))
+        config = default_config(model, machine=args.machine, source=args.model)
+    else:
+        msg = "give --store STORE --machine ID or --model MODEL"
+        raise UsageError(msg)
+    start = _when(args.start, "--start") if args.start else None
+    data = simulate_scenario(config, args.scenario, n=args.count, fault_at=args.fault_at, component=args.component,
+                             severity=args.severity, noise=args.noise, interval=timedelta(minutes=args.interval),
+                             start=start, model=model, rng=args.seed)
+    manifest = write_scenario(data, args.directory, machine=config.machine, scenario=args.scenario,
+                              extension=args.format)
+    faulty = [m.index for m in data if m.fault]
+    text = (f"{config.machine}: {len(data)} measurements ({args.scenario}"
+            + (f", fault {data[faulty[0]].fault} from measurement {faulty[0]}" if faulty else "")
+            + f"), {data[0].frf.freq.size} lines x {len(config.outputs)} outputs x {len(config.inputs)} inputs, "
+            f"{100 * args.noise:g} % noise; wrote {manifest}")
+    emit(args, {"manifest": str(manifest), "count": len(data), "first_fault": faulty[0] if faulty else None}, text)
+    return 0
+
+
+def ingest(args: argparse.Namespace) -> int:
+    from tqdm import tqdm
+
+    from cappe.io import read_measurements
+    from cappe.monitor import Monitor, MonitorConfig, read_scenario
+    from cappe.monitor import ingest as run_ingest
+
+    conditions = number_pairs(args.condition, "--condition")
+    jobs: list[tuple[Path, datetime, dict[str, float]]] = []
+    if args.manifest:
+        _, entries = read_scenario(args.manifest)
+        jobs += [(e["file"], e["timestamp"], {**e.get("conditions", {}), **conditions}) for e in entries]
+    if args.time and len(args.files) != 1:
+        msg = "--time needs exactly one FILE"
+        raise UsageError(msg)
+    for name in args.files:
+        path = Path(name)
+        when = _when(args.time, "--time") if args.time else datetime.fromtimestamp(path.stat().st_mtime, UTC)
+        jobs.append((path, when, conditions))
+    if not jobs:
+        msg = "give measurement FILEs or --manifest"
+        raise UsageError(msg)
+    results = []
+    lines = []
+    with _open(args.store) as store:
+        monitor = Monitor(MonitorConfig.from_dict(store.machine_config(args.machine)))
+        for path, when, conds in tqdm(jobs, desc="ingest", unit="meas", disable=len(jobs) < 3 or args.json,
+                                      leave=False):
+            result = run_ingest(store, args.machine, read_measurements(path), timestamp=when, source=str(path),
+                                conditions=conds, monitor=monitor)
+            results.append({"file": str(path), **result.to_dict()})
+            for alarm in result.alarms:
+                lines.append(f"ALARM {when.isoformat()} {path.name}: {alarm.message}")
+        counts = store.counts(args.machine)
+        has_baseline = store.baseline(args.machine) is not None
+    last = results[-1]
+    lines.append(f"{args.machine}: ingested {len(results)} measurement(s); {counts['measurements']} recorded, "
+                 f"{counts['alarms']} alarm(s) in total")
+    lines.append("latest factors: " + ", ".join(f"{k} {v:.4f}" for k, v in last["factors"].items()))
+    if not has_baseline:
+        lines.append("no baseline yet: learn one with `cappe monitor baseline` to start detection")
+    elif last["active"]:
+        lines.append("active faults: " + ", ".join(f"{k} ({v})" for k, v in last["active"].items()))
+    emit(args, {"machine": args.machine, "measurements": results, "counts": counts}, "\n".join(lines))
+    return 0
+
+
+def baseline(args: argparse.Namespace) -> int:
+    from cappe.monitor import learn_store_baseline
+
+    with _open(args.store) as store:
+        result = learn_store_baseline(store, args.machine, first=args.first,
+                                      since=_when(args.since, "--since") if args.since else None,
+                                      until=_when(args.until, "--until") if args.until else None,
+                                      resolution=args.resolution)
+    doc = result.to_dict()
+    lines = [f"{args.machine}: baseline from {result.n_measurements} measurement(s)"
+             + (f", depending on {', '.join(result.conditions)}" if result.conditions else "")]
+    lines.append(f"  {'component':10s} {'factor':>8s} {'std %':>8s}")
+    for name in result.names:
+        lines.append(f"  {name:10s} {doc['mean'][name]:8.4f} {100 * doc['std'][name] / doc['mean'][name]:8.4f}")
+    doc.pop("frf", None)  # the mean FRF is for the dashboard, not the terminal
+    emit(args, doc, "\n".join(lines))
+    return 0
+
+
+def _status_of(store: Any, machine: str) -> dict[str, Any]:
+    from cappe.monitor import SEVERITY_GRADES
+
+    latest = store.latest_measurement(machine)
+    table = store.estimates(machine, path="fast")
+    factors: dict[str, Any] = {}
+    if latest is not None and len(table):
+        rows = table[table["measurement_id"] == latest.id]
+        factors = {r.parameter: {"value": float(r.value), "std": None if r.std is None else float(r.std)}
+                   for r in rows.itertuples()}
+    active = store.alarms(machine, unacknowledged=True)
+    grades = [a.severity for a in active if a.severity in SEVERITY_GRADES]
+    worst = max(grades, key=SEVERITY_GRADES.index) if grades else None
+    return {"machine": machine, "measurements": store.counts(machine)["measurements"],
+            "latest": None if latest is None else latest.to_dict(), "factors": factors,
+            "baseline": store.baseline(machine) is not None,
+            "unacknowledged_alarms": [a.to_dict() for a in active], "worst_severity": worst}
+
+
+def status(args: argparse.Namespace) -> int:
+    with _open(args.store) as store:
+        machines = [args.machine] if args.machine else store.machines()
+        docs = [_status_of(store, m) for m in machines]
+    lines = []
+    for d in docs:
+        when = d["latest"]["timestamp"] if d["latest"] else "never"
+        lines.append(f"{d['machine']}: {d['measurements']} measurement(s), latest {when}, "
+                     f"{'baseline learned' if d['baseline'] else 'no baseline'}, "
+                     f"{len(d['unacknowledged_alarms'])} unacknowledged alarm(s), worst: {d['worst_severity'] or '-'}")
+        for name, f in d["factors"].items():
+            std = f"+- {f['std']:.2g}" if f["std"] is not None else ""
+            lines.append(f"  {name:10s} {f['value']:.4f} {std}")
+    emit(args, {"machines": docs}, "\n".join(lines) if lines else f"{args.store}: no machines")
+    return 0
+
+
+def history(args: argparse.Namespace) -> int:
+    with _open(args.store) as store:
+        table = store.estimates(args.machine, path=args.path, parameters=names(args.parameter))
+    if table.empty:
+        emit(args, {"machine": args.machine, "rows": []}, f"{args.machine}: no {args.path} estimates recorded")
+        return 0
+    wide = table.pivot_table(index=["measurement_id", "timestamp"], columns="parameter", values="value")
+    if args.last:
+        wide = wide.tail(args.last)
+    if args.csv:
+        from cappe.io import write_text
+
+        write_text(args.csv, wide.to_csv())
+    text = wide.to_string(float_format=lambda v: f"{v:.4f}")
+    rows = [{"measurement_id": int(i), "timestamp": str(t), **row.to_dict()} for (i, t), row in wide.iterrows()]
+    emit(args, {"machine": args.machine, "path": args.path, "rows": rows}, text)
+    return 0
+
+
+def alarms(args: argparse.Namespace) -> int:
+    with _open(args.store) as store:
+        if args.ack is not None:
+            store.acknowledge(args.ack)
+        records = store.alarms(args.machine, unacknowledged=not args.all)
+    lines = [f"{args.machine}: {len(records)} {'' if args.all else 'unacknowledged '}alarm(s)"
+             + (f"; acknowledged {args.ack}" if args.ack is not None else "")]
+    for a in records:
+        mark = "acknowledged" if a.acknowledged else "open"
+        lines.append(f"  #{a.id} {a.timestamp.isoformat()} [{a.severity}, {mark}] {a.message}")
+    emit(args, {"machine": args.machine, "alarms": [a.to_dict() for a in records]}, "\n".join(lines))
+    return 0
+
+
+def serve(args: argparse.Namespace) -> int:
+    from cappe.monitor import make_server
+
+    with _open(args.store) as store:
+        server = make_server(store, host=args.host, port=args.port)
+        print(f"cappe dashboard of {args.store} at {server.url} (Ctrl-C stops it)", flush=True)
+        try:
+            server.serve_forever()
+        except KeyboardInterrupt:
+            pass
+        finally:
+            server.shutdown()
+    return 0
