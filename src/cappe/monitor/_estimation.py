@@ -162,6 +162,7 @@ class FactorEstimator:
         self._S = s_mat[out_index].astype(complex)
         self._order = np.array([DERIVATIVE_ORDER[model.output_quantities[k]] for k in out_index])
         self._grid: tuple[bytes, Array, CArray] | None = None  # lines -> weights cache
+        self._start: tuple[tuple[bytes, bytes], CArray, Array] | None = None  # start point -> model, Jacobian
 
     # -- model side -----------------------------------------------------------------------------------------
     def parameters(self, log_factor: Array) -> Array:
@@ -276,15 +277,29 @@ class FactorEstimator:
         max_step = 0.5  # a trust region in log-factor: at most a factor e^0.5 per iteration
         s = np.zeros(n) if start is None else np.asarray(start, dtype=float).copy()
 
-        def evaluate(s_vec: Array) -> tuple[Array, Array]:
-            p = self.parameters(s_vec)
-            x, lt = self._dynamic(p, freq)
+        def model(s_vec: Array) -> tuple[CArray, CArray, CArray]:
+            x, lt = self._dynamic(self.parameters(s_vec), freq)
             h = np.where(used, np.moveaxis(self._S @ x, 0, -1) * self._scale(freq)[:, None, :], 1.0)
-            r = (weights * np.log(h / h_meas)).ravel()
-            jac = (weights[None] * self._jacobian(p, freq, x, lt) / h[None]).reshape(n, -1)
-            return np.concatenate([r.real, r.imag]), np.concatenate([jac.real, jac.imag], axis=1).T
+            return h, x, lt
 
-        r, jac = evaluate(s)
+        def residual(h: CArray) -> Array:
+            r = (weights * np.log(h / h_meas)).ravel()
+            return np.concatenate([r.real, r.imag])
+
+        def jacobian(s_vec: Array, h: CArray, x: CArray, lt: CArray) -> Array:
+            jac = (weights[None] * self._jacobian(self.parameters(s_vec), freq, x, lt) / h[None]).reshape(n, -1)
+            return np.concatenate([jac.real, jac.imag], axis=1).T
+
+        # the model and its Jacobian at the start do not depend on the data: a monitor starts every healthy
+        # measurement from the same point, so they are kept for the next fit on the same lines
+        key = (s.tobytes(), freq.tobytes())
+        if self._start is not None and self._start[0] == key:
+            h, jac = self._start[1], self._start[2]
+        else:
+            h, x, lt = model(s)
+            jac = jacobian(s, h, x, lt)
+            self._start = (key, h, jac)
+        r = residual(h)
         cost = 0.5 * float(r @ r)
         lam = 1e-3
         message = "maximum number of iterations reached"
@@ -304,7 +319,8 @@ class FactorEstimator:
                 if largest > max_step:
                     step *= max_step / largest
                 with np.errstate(all="ignore"):
-                    r_new, jac_new = evaluate(s + step)
+                    h_new, x_new, lt_new = model(s + step)
+                    r_new = residual(h_new)
                 cost_new = 0.5 * float(r_new @ r_new)
                 if np.isfinite(cost_new) and (cost_new <= cost or lam > 1e12):
                     break
@@ -319,15 +335,17 @@ class FactorEstimator:
             s = s + step
             improvement = cost - cost_new
             # the step in units of the estimate's own standard deviation (its Mahalanobis length): once it is
-            # below 1 % of one, further iterations cannot change the result in any way that matters
+            # below 1 % of one, further iterations cannot change the result in any way that matters, and the
+            # Jacobian of the last point serves the covariance
             variance = 2.0 * cost_new / max(r_new.size - n, 1)
             decrement = float(step @ jtj @ step) / max(variance, 1e-300)
-            r, jac, cost = r_new, jac_new, cost_new
+            r, cost = r_new, cost_new
             lam = max(lam / 10.0, 1e-12)
             if decrement < 1e-4 or np.max(np.abs(step)) < 1e-9 or improvement <= 1e-12 * max(cost, 1e-300):
                 message = "converged"
                 converged = True
                 break
+            jac = jacobian(s, h_new, x_new, lt_new)
         jtj = jac.T @ jac
         rank = int(np.linalg.matrix_rank(jtj))
         dof = max(2 * int(used.sum()) - n, 1)
