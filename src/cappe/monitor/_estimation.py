@@ -356,7 +356,8 @@ class FactorEstimator:
             message = f"{message}; Jacobian rank {rank} < {n} groups (not all identifiable from these channels)"
         if not success:
             warnings.warn(f"stiffness-factor fit: {message}", ConvergenceWarning, stacklevel=2)
-        return FactorEstimate(self.names, s, np.asarray(covariance, dtype=float), cost, float(np.sqrt(sigma2)), iterations, success, message)
+        return FactorEstimate(self.names, s, np.asarray(covariance, dtype=float), cost, float(np.sqrt(sigma2)),
+                              iterations, success, message)
 
     def direction(self, parameter: str, data_freq: Sequence[float] | None = None) -> Array:
         """How a change of any model parameter shows in the group log-factors: ``d s / d ln parameter``.

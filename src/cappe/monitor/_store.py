@@ -21,9 +21,13 @@ Ingests and concurrency
 Everything one measurement brings (the measurement, its features, estimates, alarms and the new detector state)
 is written in one transaction, :meth:`HistoryStore.transaction`: all or nothing, committed when the ``with`` block
 ends normally, rolled back when it raises. Ingests into the same machine are serialized across threads and
-processes: SQLite takes its write lock at ``BEGIN IMMEDIATE``, PostgreSQL locks the machine's row with
-``SELECT ... FOR UPDATE``, so the detector state read at the start of a transaction is never stale. A store
-object may be shared between threads; each process opens its own.
+processes: SQLite takes its write lock (for the whole file) at ``BEGIN IMMEDIATE``, PostgreSQL locks the
+machine's row with ``SELECT ... FOR UPDATE`` (other machines ingest in parallel), so the detector state read at
+the start of a transaction is never stale. A SQLite writer that cannot get the lock within the busy timeout
+raises :class:`~cappe.exceptions.DataError`; PostgreSQL waits for the row as long as it takes. Every other write
+(machines, baselines, acknowledgements) is a short transaction of its own; a thread with an open ingest
+transaction writes through it (:meth:`IngestTransaction.set_baseline`). A store object may be shared between
+threads; each process opens its own.
 
 Timestamps have microsecond resolution; naive ``datetime`` values are refused. JSON documents (configurations,
 baselines, states, metadata, diagnoses) are stored as text; NumPy scalars and arrays in them become numbers and
