@@ -22,7 +22,7 @@ def _store_options(p: argparse.ArgumentParser, *, machine: bool = True) -> None:
     p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL "
                                                    "(postgresql+psycopg://user@host/db)")
     if machine:
-        p.add_argument("--machine", required=True, help="machine id")
+        p.add_argument("--machine", help="machine id (default: the store's only machine)")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
 
 
@@ -30,7 +30,8 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p = cmds.add_parser("init", help="record a machine: model, channels, components and alarm rules",
                         description="Record a machine in a history store (created if missing). Components default "
                                     "to the model's element groups (front_x/front_y/front_z -> front).")
-    _store_options(p)
+    _store_options(p, machine=False)
+    p.add_argument("--machine", required=True, help="machine id")
     p.add_argument("--model", required=True, help="model YAML file or builtin:NAME")
     p.add_argument("--params", metavar="FILE.json", help="parameter values of the healthy reference")
     p.add_argument("--set", dest="overrides", metavar="NAME=VALUE", action="append", default=[],
@@ -58,7 +59,7 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
                                     "a fault (bearing-loss, loosening-screw, preload-loss), plus scenario.json.")
     p.add_argument("scenario", choices=("healthy", "bearing-loss", "loosening-screw", "preload-loss"))
     p.add_argument("--store", help="take the machine config from this store (with --machine)")
-    p.add_argument("--machine", default="machine", help="machine id")
+    p.add_argument("--machine", help="machine id (default: the store's only machine; 'machine' with --model)")
     p.add_argument("--model", help="model for a default config (without --store)")
     p.add_argument("-n", "--count", type=int, default=200, help="measurements (default 200)")
     p.add_argument("--fault-at", type=int, help="first faulty measurement (default count / 2)")
@@ -74,10 +75,14 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.set_defaults(func=simulate)
 
     p = cmds.add_parser("ingest", help="run the chain on measurements and record everything",
+                        usage="cappe monitor ingest STORE [FILE ...] [--machine ID] [--manifest M] [options]",
                         description="FRF or time-data files (UFF 58, CSV, npz): features, stiffness factors, "
-                                    "detection, diagnosis and severity, recorded in the store.")
-    _store_options(p)
+                                    "detection, diagnosis and severity, recorded in the store. The files follow "
+                                    "STORE directly.")
+    p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL")
     p.add_argument("files", metavar="FILE", nargs="*", help="measurement files")
+    p.add_argument("--machine", help="machine id (default: the store's only machine)")
+    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
     p.add_argument("--manifest", help="scenario.json from `cappe monitor simulate` (files, times, conditions)")
     p.add_argument("--time", help="ISO time of a single FILE (default: the file's modification time)")
     p.add_argument("--condition", metavar="NAME=VALUE", action="append", default=[],
@@ -130,6 +135,17 @@ def _open(path: str, *, create: bool = False) -> Any:
     return HistoryStore(path)
 
 
+def _machine(args: argparse.Namespace, store: Any) -> str:
+    """``--machine``, or the store's only machine."""
+    if args.machine:
+        return str(args.machine)
+    known = store.machines()
+    if len(known) != 1:
+        msg = f"--machine is needed: {args.store} holds machines {known}"
+        raise UsageError(msg)
+    return str(known[0])
+
+
 def _when(text: str, option: str) -> datetime:
     try:
         value = datetime.fromisoformat(text)
@@ -178,11 +194,11 @@ def simulate(args: argparse.Namespace) -> int:
 
     if args.store:
         with _open(args.store) as store:
-            config = MonitorConfig.from_dict(store.machine_config(args.machine))
+            config = MonitorConfig.from_dict(store.machine_config(_machine(args, store)))
         model = NumericModel(load_model(config.model))
     elif args.model:
         model = NumericModel(load_model(args.model))
-        config = default_config(model, machine=args.machine, source=args.model)
+        config = default_config(model, machine=args.machine or "machine", source=args.model)
     else:
         msg = "give --store STORE --machine ID or --model MODEL"
         raise UsageError(msg)
@@ -226,25 +242,26 @@ def ingest(args: argparse.Namespace) -> int:
     results = []
     lines = []
     with _open(args.store) as store:
-        monitor = Monitor(MonitorConfig.from_dict(store.machine_config(args.machine)))
+        machine = _machine(args, store)
+        monitor = Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
         for path, when, conds in tqdm(jobs, desc="ingest", unit="meas", disable=len(jobs) < 3 or args.json,
                                       leave=False):
-            result = run_ingest(store, args.machine, read_measurements(path), timestamp=when, source=str(path),
+            result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
                                 conditions=conds, monitor=monitor)
             results.append({"file": str(path), **result.to_dict()})
             for alarm in result.alarms:
                 lines.append(f"ALARM {when.isoformat()} {path.name}: {alarm.message}")
-        counts = store.counts(args.machine)
-        has_baseline = store.baseline(args.machine) is not None
+        counts = store.counts(machine)
+        has_baseline = store.baseline(machine) is not None
     last = results[-1]
-    lines.append(f"{args.machine}: ingested {len(results)} measurement(s); {counts['measurements']} recorded, "
+    lines.append(f"{machine}: ingested {len(results)} measurement(s); {counts['measurements']} recorded, "
                  f"{counts['alarms']} alarm(s) in total")
     lines.append("latest factors: " + ", ".join(f"{k} {v:.4f}" for k, v in last["factors"].items()))
     if not has_baseline:
         lines.append("no baseline yet: learn one with `cappe monitor baseline` to start detection")
     elif last["active"]:
         lines.append("active faults: " + ", ".join(f"{k} ({v})" for k, v in last["active"].items()))
-    emit(args, {"machine": args.machine, "measurements": results, "counts": counts}, "\n".join(lines))
+    emit(args, {"machine": machine, "measurements": results, "counts": counts}, "\n".join(lines))
     return 0
 
 
@@ -252,12 +269,13 @@ def baseline(args: argparse.Namespace) -> int:
     from cappe.monitor import learn_store_baseline
 
     with _open(args.store) as store:
-        result = learn_store_baseline(store, args.machine, first=args.first,
+        machine = _machine(args, store)
+        result = learn_store_baseline(store, machine, first=args.first,
                                       since=_when(args.since, "--since") if args.since else None,
                                       until=_when(args.until, "--until") if args.until else None,
                                       resolution=args.resolution)
     doc = result.to_dict()
-    lines = [f"{args.machine}: baseline from {result.n_measurements} measurement(s)"
+    lines = [f"{machine}: baseline from {result.n_measurements} measurement(s)"
              + (f", depending on {', '.join(result.conditions)}" if result.conditions else "")]
     lines.append(f"  {'component':10s} {'factor':>8s} {'std %':>8s}")
     for name in result.names:
@@ -305,9 +323,10 @@ def status(args: argparse.Namespace) -> int:
 
 def history(args: argparse.Namespace) -> int:
     with _open(args.store) as store:
-        table = store.estimates(args.machine, path=args.path, parameters=names(args.parameter))
+        machine = _machine(args, store)
+        table = store.estimates(machine, path=args.path, parameters=names(args.parameter))
     if table.empty:
-        emit(args, {"machine": args.machine, "rows": []}, f"{args.machine}: no {args.path} estimates recorded")
+        emit(args, {"machine": machine, "rows": []}, f"{machine}: no {args.path} estimates recorded")
         return 0
     wide = table.pivot_table(index=["measurement_id", "timestamp"], columns="parameter", values="value")
     if args.last:
@@ -318,21 +337,22 @@ def history(args: argparse.Namespace) -> int:
         write_text(args.csv, wide.to_csv())
     text = wide.to_string(float_format=lambda v: f"{v:.4f}")
     rows = [{"measurement_id": int(i), "timestamp": str(t), **row.to_dict()} for (i, t), row in wide.iterrows()]
-    emit(args, {"machine": args.machine, "path": args.path, "rows": rows}, text)
+    emit(args, {"machine": machine, "path": args.path, "rows": rows}, text)
     return 0
 
 
 def alarms(args: argparse.Namespace) -> int:
     with _open(args.store) as store:
+        machine = _machine(args, store)
         if args.ack is not None:
             store.acknowledge(args.ack)
-        records = store.alarms(args.machine, unacknowledged=not args.all)
-    lines = [f"{args.machine}: {len(records)} {'' if args.all else 'unacknowledged '}alarm(s)"
+        records = store.alarms(machine, unacknowledged=not args.all)
+    lines = [f"{machine}: {len(records)} {'' if args.all else 'unacknowledged '}alarm(s)"
              + (f"; acknowledged {args.ack}" if args.ack is not None else "")]
     for a in records:
         mark = "acknowledged" if a.acknowledged else "open"
         lines.append(f"  #{a.id} {a.timestamp.isoformat()} [{a.severity}, {mark}] {a.message}")
-    emit(args, {"machine": args.machine, "alarms": [a.to_dict() for a in records]}, "\n".join(lines))
+    emit(args, {"machine": machine, "alarms": [a.to_dict() for a in records]}, "\n".join(lines))
     return 0
 
 

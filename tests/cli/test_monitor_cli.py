@@ -1,0 +1,171 @@
+"""``cappe monitor init|simulate|ingest|baseline|status|history|alarms|serve`` through main(argv)."""
+
+from __future__ import annotations
+
+import json
+import threading
+import time
+import urllib.request
+from pathlib import Path
+
+import pytest
+
+from cappe.cli import main
+from cappe.monitor import HistoryStore
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+@pytest.fixture(scope="module")
+def monitored(tmp_path_factory) -> Path:
+    """A store with one machine, a learned baseline and an ingested front-bearing loss."""
+    folder = tmp_path_factory.mktemp("monitor")
+    store = folder / "store.db"
+    common = ["--machine", "spindle-01"]
+    assert main(["monitor", "init", str(store), *common, "--model", "builtin:spindle-bearing", "--outputs",
+                 "sx,sy,hax,hay,haz,htax", "--band", "150:1000"]) == 0
+    assert main(["monitor", "simulate", "healthy", "--store", str(store), *common, "-n", "30", "--seed", "1",
+                 "-o", str(folder / "healthy")]) == 0
+    assert main(["monitor", "ingest", str(store), *common, "--manifest", str(folder / "healthy/scenario.json")]) == 0
+    assert main(["monitor", "baseline", str(store), *common]) == 0
+    assert main(["monitor", "simulate", "bearing-loss", "--store", str(store), *common, "-n", "4", "--fault-at", "1",
+                 "--seed", "2", "--start", "2026-01-06T06:00:00+00:00", "-o", str(folder / "fault")]) == 0
+    assert main(["monitor", "ingest", str(store), *common, "--manifest", str(folder / "fault/scenario.json")]) == 0
+    return folder
+
+
+def test_chain_records_and_reports_the_fault(monitored: Path, capsys) -> None:
+    store = monitored / "store.db"
+    code, out, _ = run(capsys, "monitor", "status", store, "--json")
+    assert code == 0
+    doc = json.loads(out)["machines"][0]
+    assert doc["machine"] == "spindle-01"
+    assert doc["measurements"] == 34
+    assert doc["worst_severity"] == "conditionally tolerable"
+    # the latest factors are the store's own last fast-path estimates
+    with HistoryStore(store) as history:
+        table = history.estimates("spindle-01", path="fast")
+        last = table[table["measurement_id"] == table["measurement_id"].max()]
+        alarms = history.alarms("spindle-01")
+    assert doc["factors"]["front"]["value"] == pytest.approx(float(last[last["parameter"] == "front"]["value"].iloc[0]))
+    assert len(alarms) == 1
+    assert alarms[0].component == "front"
+    assert alarms[0].diagnosis["hypothesis"] == "front"
+    assert alarms[0].diagnosis["change"] == pytest.approx(-0.10, abs=0.01)  # the simulated 10 % loss
+
+
+def test_alarms_and_acknowledge(monitored: Path, capsys) -> None:
+    store = monitored / "store.db"
+    code, out, _ = run(capsys, "monitor", "alarms", store, "--machine", "spindle-01")
+    assert code == 0
+    assert "front bearing: -10.0 %" in out
+    with HistoryStore(store) as history:
+        alarm_id = history.alarms("spindle-01")[0].id
+    code, out, _ = run(capsys, "monitor", "alarms", store, "--machine", "spindle-01", "--ack", alarm_id, "--json")
+    assert code == 0
+    assert json.loads(out)["alarms"] == []  # nothing unacknowledged left
+    code, out, _ = run(capsys, "monitor", "alarms", store, "--machine", "spindle-01", "--all")
+    assert "acknowledged" in out
+
+
+def test_history_table_and_csv(monitored: Path, capsys, tmp_path: Path) -> None:
+    store = monitored / "store.db"
+    csv = tmp_path / "h.csv"
+    code, out, _ = run(capsys, "monitor", "history", store, "--machine", "spindle-01", "--last", "3", "--csv", csv,
+                       "--json")
+    assert code == 0
+    rows = json.loads(out)["rows"]
+    assert len(rows) == 3
+    assert rows[-1]["front"] == pytest.approx(0.9, abs=0.02)  # 10 % lost (the temperature moves it a little)
+    assert csv.read_text().splitlines()[0].startswith("measurement_id,timestamp")
+    code, out, _ = run(capsys, "monitor", "history", store, "--machine", "spindle-01", "--path", "slow", "--json")
+    slow = json.loads(out)["rows"]
+    assert len(slow) == 1  # the alarm ran the full estimation once
+    assert slow[0]["kfx"] == pytest.approx(0.9, abs=0.02)
+
+
+def test_serve_answers(monitored: Path, capsys, monkeypatch) -> None:
+    import cappe.monitor as monitor_api
+
+    started = {}
+    real = monitor_api.make_server
+
+    def capture(*args, **kwargs):
+        server = real(*args, **kwargs)
+        started["server"] = server
+        return server
+
+    monkeypatch.setattr(monitor_api, "make_server", capture)
+    thread = threading.Thread(target=main, args=(["monitor", "serve", str(monitored / "store.db"), "--port", "0"],),
+                              daemon=True)
+    thread.start()
+    for _ in range(200):
+        if "server" in started:
+            break
+        time.sleep(0.05)
+    assert "server" in started, "cappe monitor serve did not start a server"
+    server = started["server"]
+    try:
+        with urllib.request.urlopen(f"{server.url}api/machines", timeout=10) as response:
+            machines = json.loads(response.read())
+    finally:
+        server.shutdown()
+        thread.join(timeout=10)
+    assert "spindle-01" in json.dumps(machines)
+
+
+@pytest.mark.parametrize(
+    ("argv", "code", "match"),
+    [
+        (["monitor", "status", "missing.db"], 2, "does not exist"),
+        (["monitor", "ingest", "{store}", "--machine", "spindle-01"], 2, "give measurement FILEs or --manifest"),
+        (["monitor", "ingest", "{store}", "--machine", "nobody", "--manifest", "{folder}/fault/scenario.json"], 1,
+         "nobody"),
+        (["monitor", "ingest", "{store}", "a.uff", "b.uff", "--machine", "spindle-01", "--time", "2026-01-01"], 2,
+         "--time needs exactly one FILE"),
+        (["monitor", "status", "{folder}/two.db"], 0, ""),
+        (["monitor", "alarms", "{folder}/two.db"], 2, r"--machine is needed: .* holds machines \['a', 'b'\]"),
+        (["monitor", "baseline", "{store}", "--machine", "spindle-01", "--since", "yesterday"], 2, "ISO time"),
+        (["monitor", "simulate", "healthy", "-o", "x"], 2, "--store STORE --machine ID or --model MODEL"),
+        (["monitor", "init", "{folder}/other.db", "--machine", "m", "--model", "builtin:spindle-bearing",
+          "--outputs", "sx,nope"], 1, r"output\(s\) \['nope'\] not in model"),
+        (["monitor", "init", "{store}", "--machine", "spindle-01", "--model", "builtin:spindle-bearing"], 1,
+         "already exists"),
+    ],
+)
+def test_errors(monitored: Path, capsys, argv, code, match) -> None:
+    import re
+
+    two = monitored / "two.db"
+    if not two.exists():
+        with HistoryStore(two) as store:
+            store.add_machine("a", {})
+            store.add_machine("b", {})
+    filled = [a.format(store=monitored / "store.db", folder=monitored) for a in argv]
+    got, _, err = run(capsys, *filled)
+    assert got == code
+    assert re.search(match, err), err
+
+
+def test_ingest_without_baseline_says_so(tmp_path: Path, capsys) -> None:
+    store = tmp_path / "s.db"
+    assert main(["monitor", "init", str(store), "--machine", "m", "--model", "builtin:spindle-bearing", "--outputs",
+                 "sx,hax", "--band", "150:1000", "--detection", "ewma", "--severity",
+                 "tolerable=0.1,intolerable=0.3"]) == 0
+    assert main(["monitor", "simulate", "healthy", "--model", "builtin:spindle-bearing", "--machine", "m", "-n",
+                 "1", "--format", "csv", "-o", str(tmp_path / "d")]) == 0
+    code, out, _ = run(capsys, "monitor", "ingest", store, tmp_path / "d" / "m00000.csv",
+                       "--time", "2026-02-01T10:00:00", "--condition", "temperature=21.5")  # the only machine
+    assert code == 0
+    assert "no baseline yet" in out
+    with HistoryStore(store) as history:
+        record = history.latest_measurement("m")
+        config = history.machine_config("m")
+    assert record.conditions == {"temperature": 21.5}
+    assert record.timestamp.isoformat() == "2026-02-01T10:00:00+00:00"  # naive times are read as UTC
+    assert config["detection"] == "ewma"
+    assert config["severity"] == {"tolerable": 0.1, "intolerable": 0.3}
