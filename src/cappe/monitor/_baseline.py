@@ -238,6 +238,11 @@ def learn_baseline(
         raise DataError(msg)
     common = sorted(set.intersection(*(set(c) for c in conds))) if conds else []
     values = np.array([[float(c[k]) for k in common] for c in conds], dtype=float).reshape(n_meas, len(common))
+    bad = np.argwhere(~np.isfinite(values))
+    if bad.size:
+        i, j = bad[0]
+        msg = f"baseline: operating condition '{common[j]}' of measurement {i} is not finite ({values[i, j]})"
+        raise DataError(msg)
     varying = [j for j in range(len(common)) if np.ptp(values[:, j]) > 0]
     names_c = tuple(common[j] for j in varying)
     values = values[:, varying]

@@ -24,7 +24,8 @@ import numpy as np
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CONFIG_FORMAT", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds", "default_config"]
+__all__ = ["CONFIG_FORMAT", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds",
+           "default_components", "default_config"]
 
 CONFIG_FORMAT = "cappe.monitor-config/1"
 
@@ -167,6 +168,9 @@ class MonitorConfig:
         lo, hi = self.band
         if not (np.isfinite(lo) and np.isfinite(hi) and 0 <= lo < hi):
             msg = f"monitor config '{self.machine}': band must be 0 <= LO < HI Hz; got {self.band!r}"
+            raise DataError(msg)
+        if not self.inputs or not self.outputs:
+            msg = f"monitor config '{self.machine}': inputs and outputs must not be empty"
             raise DataError(msg)
         if not self.components:
             msg = f"monitor config '{self.machine}': at least one component is needed"

@@ -95,6 +95,10 @@ def _solve_limit(arl: Any, target: float, lo: float, hi: float, what: str) -> fl
     if not (target > 1 and np.isfinite(target)):
         msg = f"{what}: the in-control ARL must be a finite number > 1; got {target!r}"
         raise DataError(msg)
+    if arl(lo) >= target:
+        # even the narrowest limit is quieter than asked (a large reference k): use it; the chart then has fewer
+        # false alarms than asked, never more
+        return lo
     while arl(hi) < target:
         hi *= 1.5
         if hi > 1e3:
@@ -202,7 +206,7 @@ class SequentialDetector:
         self.names = tuple(names)
         self.scale = np.asarray(scale, dtype=float)
         if self.scale.shape != (len(self.names),) or not np.all(self.scale > 0):
-            msg = f"detector scales must be {len(self.names)} positive numbers; got {list(self.scale)}"
+            msg = f"detector scales must be {len(self.names)} positive numbers; got {self.scale.tolist()}"
             raise DataError(msg)
         if method not in ("cusum", "ewma"):
             msg = f"detection method must be 'cusum' or 'ewma'; got {method!r}"
@@ -247,7 +251,7 @@ class SequentialDetector:
         """Feed one measurement's deviations (same units as ``scale``); return the new state and the signals."""
         d = np.asarray(deviation, dtype=float)
         if d.shape != (len(self.names),) or not np.all(np.isfinite(d)):
-            msg = f"detector needs {len(self.names)} finite deviations ({list(self.names)}); got {list(d)}"
+            msg = f"detector needs {len(self.names)} finite deviations ({list(self.names)}); got {d.tolist()}"
             raise DataError(msg)
         st = dict(self.initial_state() if state is None else state)
         if list(st.get("names", [])) != list(self.names) or st.get("method") != self.method:

@@ -151,6 +151,9 @@ def diagnose(change: ArrayLike, covariance: Array, hypotheses: Sequence[FaultHyp
             msg = f"fault hypothesis '{hyp.name}' needs a non-zero direction of length {n}"
             raise DataError(msg)
         weight = float(d @ info @ d)
+        if weight <= 0:  # the hypothesis moves only what the covariance calls unobservable: it explains nothing
+            fits.append((total, 0.0, np.inf))
+            continue
         a = float(d @ info @ dvec) / weight
         fits.append((max(total - a * a * weight, 0.0), a, 1.0 / np.sqrt(weight)))
     misfits = np.array([f[0] for f in fits])
