@@ -293,7 +293,11 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
     factors: dict[str, Any] = {}
     if latest is not None and len(table):
         rows = table[table["measurement_id"] == latest.id]
-        factors = {r.parameter: {"value": float(r.value), "std": None if r.std is None else float(r.std)}
+        changes = store.estimates(machine, path="deviation")
+        changes = changes[changes["measurement_id"] == latest.id]
+        change = dict(zip(changes["parameter"], changes["value"], strict=True))
+        factors = {r.parameter: {"value": float(r.value), "std": None if r.std is None else float(r.std),
+                                 "change": None if r.parameter not in change else float(change[r.parameter])}
                    for r in rows.itertuples()}
     active = store.alarms(machine, unacknowledged=True)
     grades = [a.severity for a in active if a.severity in SEVERITY_GRADES]
@@ -316,7 +320,8 @@ def status(args: argparse.Namespace) -> int:
                      f"{len(d['unacknowledged_alarms'])} unacknowledged alarm(s), worst: {d['worst_severity'] or '-'}")
         for name, f in d["factors"].items():
             std = f"+- {f['std']:.2g}" if f["std"] is not None else ""
-            lines.append(f"  {name:10s} {f['value']:.4f} {std}")
+            change = f"  {100 * f['change']:+6.2f} % from healthy" if f.get("change") is not None else ""
+            lines.append(f"  {name:10s} {f['value']:.4f} {std:10s}{change}")
     emit(args, {"machines": docs}, "\n".join(lines) if lines else f"{args.store}: no machines")
     return 0
 

@@ -397,6 +397,9 @@ def ingest(
                          std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
         if baseline is not None:
             state, deviation, alarms = mon.step(state, analysis, conditions, baseline)
+            # the change from the healthy expectation at these conditions, for people and the dashboard
+            tx.add_estimates(mid, path="deviation", values=dict(zip(names, np.expm1(deviation).tolist(), strict=True)),
+                             std=dict(zip(names, baseline.scale.tolist(), strict=True)))
             for alarm in alarms:
                 tx.add_alarm(mid, component=alarm.component, statistic=alarm.statistic, value=alarm.value,
                              severity=alarm.severity, diagnosis=alarm.diagnosis.to_dict(), message=alarm.message)

@@ -255,6 +255,9 @@ class _Api:
         config = self._machine(machine)
         baseline = self.store.baseline(machine)
         fast = _sorted_frame(self.store.estimates(machine, path="fast"))
+        # the chain records each measurement's change from the healthy expectation at its own operating
+        # conditions (temperature-compensated) as path "deviation", with the charts' standard deviation
+        deviation = _sorted_frame(self.store.estimates(machine, path="deviation"))
         names = [str(n) for n in fast["parameter"].unique()] if not fast.empty else []
         components = []
         for component in self._components(config, names):
@@ -266,6 +269,14 @@ class _Api:
             mean, base_std = base["mean"], base["std"]
             change = None if value is None or mean in (None, 0.0) else value / mean - 1.0
             z = None if value is None or mean is None or not base_std else (value - mean) / base_std
+            if last is not None and not deviation.empty:
+                dev = deviation[(deviation["parameter"] == component["name"])
+                                & (deviation["measurement_id"] == last["measurement_id"])]
+                dev_value = _number(dev.iloc[-1]["value"]) if len(dev) else None
+                dev_std = _number(dev.iloc[-1]["std"]) if len(dev) else None
+                if dev_value is not None and dev_value > -1.0:
+                    change = dev_value
+                    z = float(np.log1p(dev_value)) / dev_std if dev_std else None
             components.append({
                 **component,
                 "measurement_id": None if last is None else int(last["measurement_id"]),
