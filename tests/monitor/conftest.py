@@ -1,4 +1,5 @@
-"""Fixtures of the monitoring tests: a throw-away PostgreSQL server for the ``postgres``-marked tests."""
+"""Fixtures of the monitoring tests: the compiled spindle and rig models, and a throw-away PostgreSQL server for
+the ``postgres``-marked tests."""
 
 from __future__ import annotations
 
@@ -9,7 +10,21 @@ from typing import NoReturn
 import pytest
 from _postgres import PostgresServer, find_server_binaries
 
+from cappe.model import NumericModel, load_model
+
 _DATABASE = "cappe_test"
+
+
+@pytest.fixture(scope="session")
+def spindle() -> NumericModel:
+    """The compiled spindle-bearing model (immutable, shared by the session)."""
+    return NumericModel(load_model("builtin:spindle-bearing"))
+
+
+@pytest.fixture(scope="session")
+def rig() -> NumericModel:
+    """The compiled two-mass rig."""
+    return NumericModel(load_model("builtin:two-mass-rig"))
 
 
 def _unavailable(reason: str) -> NoReturn:

@@ -12,18 +12,13 @@ import numpy as np
 import pytest
 
 from cappe.exceptions import DataError
-from cappe.model import NumericModel, load_model
+from cappe.model import NumericModel
 from cappe.monitor import Monitor, default_config, simulate_scenario
 
 #: The monitoring set-up of the tests: hammer at the spindle nose in x, y, z; the two shaft probes of the
 #: thesis rig and four housing accelerometers (front x/y/z, top x) -- a sensor set a shop floor can afford.
 OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
 BAND = (150.0, 1000.0)
-
-
-@pytest.fixture(scope="module")
-def spindle() -> NumericModel:
-    return NumericModel(load_model("builtin:spindle-bearing"))
 
 
 @pytest.fixture(scope="module")

@@ -11,7 +11,6 @@ import pytest
 import scipy.linalg
 
 from cappe.exceptions import DataError
-from cappe.model import NumericModel, load_model
 from cappe.monitor import (
     CONFIG_FORMAT,
     Component,
@@ -20,16 +19,6 @@ from cappe.monitor import (
     default_components,
     default_config,
 )
-
-
-@pytest.fixture(scope="module")
-def spindle() -> NumericModel:
-    return NumericModel(load_model("builtin:spindle-bearing"))
-
-
-@pytest.fixture(scope="module")
-def rig() -> NumericModel:
-    return NumericModel(load_model("builtin:two-mass-rig"))
 
 
 def minimal(**changes) -> MonitorConfig:

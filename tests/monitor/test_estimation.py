@@ -19,16 +19,6 @@ SPINDLE_BAND = (148.5, 1213.3)  # default_config's band of the spindle: 0.7 x th
 
 
 @pytest.fixture(scope="module")
-def spindle() -> NumericModel:
-    return NumericModel(load_model("builtin:spindle-bearing"))
-
-
-@pytest.fixture(scope="module")
-def rig() -> NumericModel:
-    return NumericModel(load_model("builtin:two-mass-rig"))
-
-
-@pytest.fixture(scope="module")
 def spindle_groups(spindle) -> dict[str, list[str]]:
     return {c.name: list(c.parameters) for c in default_components(spindle.structure)}
 

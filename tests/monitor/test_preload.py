@@ -10,14 +10,8 @@ import pytest
 from cappe.cli import main
 from cappe.exceptions import ModelError
 from cappe.modal import ModalEngine
-from cappe.model import NumericModel, load_model
 from cappe.monitor import preload_frfs, preload_map, sensor_visibility
 from cappe.systems.frf import FRFData
-
-
-@pytest.fixture(scope="module")
-def spindle() -> NumericModel:
-    return NumericModel(load_model("builtin:spindle-bearing"))
 
 
 def test_map_columns_are_exact_modes_of_the_system_at_each_preload(spindle):
