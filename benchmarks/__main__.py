@@ -8,6 +8,7 @@ from benchmarks import (
     bench_identify,
     bench_matrices,
     bench_modal,
+    bench_monitor,
     bench_pipeline,
     bench_scaling,
     bench_sobol,
@@ -20,6 +21,7 @@ def main() -> None:
     bench_sobol.main()
     bench_identify.main()
     bench_estimate.main()
+    bench_monitor.main()
     bench_pipeline.main()
     bench_automated.main()
     bench_scaling.main()
