@@ -443,3 +443,15 @@ def test_state_and_input_errors():
     for bad in (0.0, 1.0):
         with pytest.raises(DataError, match=rf"false_alarm_rate must be in \(0, 1\); got {bad}"):
             SequentialDetector(["a"], [1.0], false_alarm_rate=bad)
+
+
+def test_an_uncertain_estimate_moves_the_charts_less():
+    # z = d / sqrt(scale^2 + std^2): the same deviation with its own std equal to the healthy scale counts
+    # 1/sqrt(2) as much (closed form of the first CUSUM step from zero: max(0, z - k))
+    det = SequentialDetector(["a"], [0.01], false_alarm_rate=1e-3, shift=2.0)
+    sure, _ = det.update(None, [-0.03])
+    unsure, _ = det.update(None, [-0.03], [0.01])
+    assert sure["lower"][0] == pytest.approx(3.0 - 1.0)
+    assert unsure["lower"][0] == pytest.approx(3.0 / np.sqrt(2.0) - 1.0)
+    with pytest.raises(DataError, match="finite standard uncertainties >= 0"):
+        det.update(None, [0.0], [-1.0])

@@ -13,7 +13,8 @@ between measurements (the detector state travels through the store). Per measure
    measurements and after every alarm: every stiffness parameter of every component freed on its own, started
    from the fast path (the full estimation).
 4. **Detection.** Deviations of the log-factors from the baseline's expectation at the measurement's operating
-   conditions feed the CUSUM or EWMA charts (:class:`SequentialDetector`).
+   conditions, standardized by the healthy scatter and the estimate's own uncertainty, feed the CUSUM or EWMA
+   charts (:class:`SequentialDetector`).
 5. **Diagnosis.** A chart beyond its limit starts a diagnosis of the change since the chart's change point
    among the single-fault hypotheses: every component, and every fault parameter (``preload``) through its
    signature in the factors (:func:`diagnose`).
@@ -308,7 +309,8 @@ class Monitor:
         if state is None or state.get("baseline") != baseline.created:
             state = {"baseline": baseline.created, "detector": None, "active": {}, "count": 0}
         deviation = baseline.deviation(analysis.estimate.log_factor, conditions)
-        chart_state, signals = detector.update(state["detector"], deviation)
+        log_std = np.sqrt(np.clip(np.diag(analysis.estimate.covariance), 0.0, None))
+        chart_state, signals = detector.update(state["detector"], deviation, log_std)
         active: dict[str, str] = dict(state["active"])
         hyps = {h.name: h for h in self.hypotheses()}
         # clear faults whose components have all come back

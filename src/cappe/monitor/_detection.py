@@ -246,19 +246,27 @@ class SequentialDetector:
                 "ewma": list(zeros), "ewma_change": list(zeros), "count": 0}
 
     def update(
-        self, state: Mapping[str, Any] | None, deviation: ArrayLike
+        self, state: Mapping[str, Any] | None, deviation: ArrayLike, std: ArrayLike | None = None
     ) -> tuple[dict[str, Any], list[ChartSignal]]:
-        """Feed one measurement's deviations (same units as ``scale``); return the new state and the signals."""
+        """Feed one measurement's deviations (same units as ``scale``); return the new state and the signals.
+
+        ``std``, the measurement's own standard uncertainty of each deviation, widens its standardization to
+        ``sqrt(scale^2 + std^2)``: a poorly determined estimate moves the charts less.
+        """
         d = np.asarray(deviation, dtype=float)
         if d.shape != (len(self.names),) or not np.all(np.isfinite(d)):
             msg = f"detector needs {len(self.names)} finite deviations ({list(self.names)}); got {d.tolist()}"
+            raise DataError(msg)
+        own = np.zeros_like(d) if std is None else np.asarray(std, dtype=float)
+        if own.shape != d.shape or not np.all(np.isfinite(own) & (own >= 0)):
+            msg = f"detector needs {len(self.names)} finite standard uncertainties >= 0; got {own.tolist()}"
             raise DataError(msg)
         st = dict(self.initial_state() if state is None else state)
         if list(st.get("names", [])) != list(self.names) or st.get("method") != self.method:
             msg = (f"detector state is for {st.get('method')} charts on {st.get('names')}, not {self.method} on "
                    f"{list(self.names)}; learn a new baseline to reset it")
             raise DataError(msg)
-        z = d / self.scale
+        z = d / np.sqrt(self.scale**2 + own**2)
         signals: list[ChartSignal] = []
         st["count"] = int(st["count"]) + 1
         if self.method == "cusum":
