@@ -243,11 +243,24 @@ def test_readme_command_runs_as_subprocess(command, readme_dir):
 
 
 def test_demo_prints_modes_and_tfs(capsys):
-    code, out, _ = run(capsys, "demo", "--no-identify")
+    code, out, _ = run(capsys, "demo", "--no-identify", "--no-monitor")
     assert code == 0
     assert "G11(s)" in out
     assert "G21(s)" in out
     assert out.count("mode ") >= 13  # 2 two-mass modes + 11 spindle modes
+    assert "spindle monitoring" not in out
+
+
+@pytest.mark.slow
+def test_demo_monitoring_finds_each_fault(capsys):
+    code, out, _ = run(capsys, "demo", "--no-identify", "--json")
+    assert code == 0
+    alarms = json.loads(out)["monitoring_alarms"]
+    # the simulated faults: front bearing -10 %, preload -40 %, screw 2 loosening to -50 % (two grades)
+    assert [(a["scenario"], a["diagnosis"]["hypothesis"]) for a in alarms] == [
+        ("bearing-loss", "front"), ("preload-loss", "preload"), ("loosening-screw", "screw2"),
+        ("loosening-screw", "screw2")]
+    assert all(a["measurement"] >= 2 for a in alarms)  # none before the fault
 
 
 def test_readme_python_api_runs(tmp_path, monkeypatch):
