@@ -777,6 +777,13 @@
       }
     });
     refresh();
+    // a monitoring screen keeps itself current: reload every 30 s (?refresh=N seconds, 0 = never) while visible
+    const period = Number(new URLSearchParams(window.location.search).get("refresh") ?? 30);
+    if (period > 0) {
+      window.setInterval(() => {
+        if (!document.hidden) refresh();
+      }, 1000 * period);
+    }
   }
 
   if (document.readyState === "loading") document.addEventListener("DOMContentLoaded", init);
