@@ -170,11 +170,9 @@ class Monitor:
             return data
         from cappe.identify import estimate_frf
 
-        lo, hi = self.config.band
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")  # low-coherence lines are left to the fit's weights
-            return estimate_frf(data, inputs=list(self.config.inputs), outputs=list(self.config.outputs),
-                                nperseg=nperseg, band=(0.0, min(hi * 1.2, data.fs / 2)))
+        _, hi = self.config.band
+        return estimate_frf(data, inputs=list(self.config.inputs), outputs=list(self.config.outputs),
+                            nperseg=nperseg, band=(0.0, min(hi * 1.2, data.fs / 2)))
 
     def expected_modes(self, log_factor: Array) -> Array:
         """Natural frequencies (Hz) of the monitored modes of the model at these component factors."""
@@ -192,13 +190,16 @@ class Monitor:
         modal: bool = True,
     ) -> Analysis:
         """Steps 1-3 for one measurement: features and the component factors (and the slow path if asked)."""
-        frf = self.prepare(data)
+        with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
+            warnings.simplefilter("always")
+            frf = self.prepare(data)
+        notes = [f"pre-processing: {w.message}" for w in caught]
         if start is None and baseline is not None:
             start = baseline.coefficients[0]
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             estimate = self.estimator.fit(frf, start)
-        notes = [f"fast path: {w.message}" for w in caught]
+        notes += [f"fast path: {w.message}" for w in caught]
         freq = damp = np.full(len(self.mode_numbers), np.nan)
         if modal:
             freq, damp, modal_notes = modal_features(frf, band=self.config.band,
@@ -381,8 +382,11 @@ def ingest(
     mon = _monitor_for(store, machine, monitor)
     baseline_doc = store.baseline(machine)
     baseline = Baseline.from_dict(baseline_doc) if baseline_doc else None
-    frf = mon.prepare(data)
+    with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
+        warnings.simplefilter("always")
+        frf = mon.prepare(data)
     analysis = mon.analyse(frf, baseline=baseline)
+    analysis = replace(analysis, notes=(*(f"pre-processing: {w.message}" for w in caught), *analysis.notes))
     names = analysis.estimate.names
     kind = "frf" if isinstance(data, FRFData) else "time"
     deviation = None
