@@ -105,7 +105,7 @@ def test_noise_free_recovery_of_random_component_factors(spindle, spindle_groups
     freq = np.arange(140.0, 1220.0, 2.0)
     data = simulate(spindle, spindle_groups, factors, freq, spindle.input_names, spindle.output_names)
     est = component_estimator(spindle, spindle_groups)
-    result = est.fit(data)
+    result = est.estimate(data)
     assert result.success
     assert result.message == "converged"
     assert result.names == tuple(spindle_groups)
@@ -128,7 +128,7 @@ def test_reference_overrides_define_factor_one(spindle, spindle_groups):
     assert p[names.index("kfx")] == pytest.approx(0.9 * 72e6, rel=1e-14)
     assert p[names.index("kh2y")] == pytest.approx(0.9 * 110e6, rel=1e-14)
     assert p[names.index("ms")] == 10.67  # outside every group: untouched
-    np.testing.assert_allclose(est.fit(data).log_factor, 0.0, atol=1e-8)  # same stopping rule as above
+    np.testing.assert_allclose(est.estimate(data).log_factor, 0.0, atol=1e-8)  # same stopping rule as above
 
 
 # -- uncertainty under seeded noise ----------------------------------------------------------------------------
@@ -146,7 +146,7 @@ def test_reported_uncertainty_is_honest_under_relative_noise(spindle, spindle_gr
     mahalanobis, normalized = [], []
     for _ in range(n_real):
         noise = 0.01 * (rng.standard_normal(clean.H.shape) + 1j * rng.standard_normal(clean.H.shape)) / np.sqrt(2)
-        result = est.fit(FRFData(clean.freq, clean.H * (1 + noise), clean.input_names, clean.output_names))
+        result = est.estimate(FRFData(clean.freq, clean.H * (1 + noise), clean.input_names, clean.output_names))
         assert result.success
         err = result.log_factor - np.log(truth)
         mahalanobis.append(err @ np.linalg.solve(result.covariance, err))
@@ -175,7 +175,7 @@ def test_preload_direction_is_the_fit_of_a_small_preload_change(spindle, spindle
         data = spindle.system({"preload": preload}).frf(freq, list(spindle.input_names), list(spindle.output_names))
         # exact data that the factors describe only to first order (the preload moves radial and axial stiffness
         # by different laws): the misfit check would rightly call that a model mismatch, so it is off here
-        fits[preload] = est.fit(data, misfit_ratio=None).log_factor
+        fits[preload] = est.estimate(data, misfit_ratio=None).log_factor
     size = np.max(np.abs(direction))
     assert size > 0.1  # the bearings move noticeably: the comparison below is not between zeros
     # first order: s(1.02) = ln(1.02) d + O(ln(1.02)^2), a remainder of order h relative to d
@@ -204,9 +204,9 @@ def test_two_mass_rig_example(rig):
     freq = np.arange(50.0, 250.0)
     data = rig.system({"k12": 0.9 * 120e3, "k11": 1.1 * 1380e3}).frf(freq, ["F1"], ["d1", "d2"])
     est = FactorEstimator(rig, groups, inputs=["F1"], outputs=["d1", "d2"], band=(50, 250))
-    result = est.fit(data)
+    result = est.estimate(data)
     np.testing.assert_allclose(result.factor, [0.9, 1.1], rtol=1e-8)  # exact data: the stopping rule's 1e-8
-    again = est.fit(data, start=np.log([0.92, 1.08]))  # from a nearby start: the same optimum
+    again = est.estimate(data, start=np.log([0.92, 1.08]))  # from a nearby start: the same optimum
     np.testing.assert_allclose(again.factor, [0.9, 1.1], rtol=1e-8)
     d = result.to_dict()
     assert d["names"] == ["coupling", "base"]
@@ -220,7 +220,7 @@ def test_two_mass_rig_example(rig):
     outside = FRFData(np.concatenate([[10.0, 20.0], freq, [300.0]]),
                       np.concatenate([np.ones((2, 1, 2)), data.H, np.ones((2, 1, 1))], axis=-1),
                       data.input_names, data.output_names)
-    np.testing.assert_allclose(est.fit(outside).factor, [0.9, 1.1], rtol=1e-8)
+    np.testing.assert_allclose(est.estimate(outside).factor, [0.9, 1.1], rtol=1e-8)
 
 
 @pytest.mark.parametrize("component", ["front", "screw2"])
@@ -230,7 +230,7 @@ def test_a_fifty_percent_loss_converges_from_the_reference(spindle, spindle_grou
     factors[list(spindle_groups).index(component)] = 0.5
     freq = np.arange(140.0, 1220.0, 4.0)
     data = simulate(spindle, spindle_groups, factors, freq, spindle.input_names, spindle.output_names)
-    result = component_estimator(spindle, spindle_groups).fit(data)
+    result = component_estimator(spindle, spindle_groups).estimate(data)
     assert result.success
     np.testing.assert_allclose(result.factor, factors, rtol=1e-8)  # exact data: the stopping rule's 1e-8
 
@@ -244,7 +244,7 @@ def test_a_thirty_percent_coupling_loss_on_the_rig_is_found_or_flagged(rig):
     data = rig.system({"k12": 0.7 * 120e3}).frf(np.arange(50.0, 250.0), ["F1"], ["d1", "d2"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        result = est.fit(data)
+        result = est.estimate(data)
     if result.success:
         np.testing.assert_allclose(result.factor, [0.7], rtol=1e-8)
     else:
@@ -259,7 +259,7 @@ def test_unidentifiable_group_warns_and_reports_failure(rig):
     data = rig.system({"k12": 0.9 * 120e3}).frf(np.arange(50.0, 250.0), ["F1"], ["d1", "d2"])
     with pytest.warns(ConvergenceWarning, match=r"stiffness-factor fit: .*Jacobian rank 1 < 2 groups \(not all "
                                                  r"identifiable from these channels\)"):
-        result = est.fit(data)
+        result = est.estimate(data)
     assert not result.success
     assert result.factor[0] == pytest.approx(0.9, rel=1e-8)  # the identifiable group is still right
 
@@ -269,7 +269,7 @@ def test_iteration_limit_warns(rig):
                           band=(50, 250))
     data = rig.system({"k12": 0.6 * 120e3, "k11": 0.7 * 1380e3}).frf(np.arange(50.0, 250.0), ["F1"], ["d1", "d2"])
     with pytest.warns(ConvergenceWarning, match=r"stiffness-factor fit: maximum number of iterations reached"):
-        result = est.fit(data, max_iter=1)
+        result = est.estimate(data, max_iter=1)
     assert not result.success
     assert result.iterations == 1
 
@@ -290,22 +290,22 @@ def test_errors(rig):
     only_d1 = rig.system({}).frf(freq, ["F1"], ["d1"])
     with pytest.raises(DataError, match=r"FRF data lack channels \['d2'\]; they have outputs \['d1'\] and inputs "
                                         r"\['F1'\]"):
-        est.fit(only_d1)
+        est.estimate(only_d1)
     other_input = rig.system({}).frf(freq, ["F2"], ["d1", "d2"])
     with pytest.raises(DataError, match=r"FRF data lack channels \['F1'\]"):
-        est.fit(other_input)
+        est.estimate(other_input)
     few = rig.system({}).frf(np.array([10.0, 60.0, 70.0, 80.0, 300.0]), ["F1"], ["d1", "d2"])
     with pytest.raises(DataError, match=r"FRF data have 3 lines in the band 50-250 Hz; at least 4 are needed"):
-        est.fit(few)
+        est.estimate(few)
     good = rig.system({}).frf(freq, ["F1"], ["d1", "d2"])
     h = good.H.copy()
     h[0, 0, 40] = np.nan
     with pytest.raises(DataError, match=r"FRF data contain non-finite values in the band"):
-        est.fit(FRFData(freq, h, good.input_names, good.output_names))
+        est.estimate(FRFData(freq, h, good.input_names, good.output_names))
     h = good.H.copy()
     h[0, 0, 40] = 0.0  # d1 at 90 Hz, near the first mode: a line the fit uses
     with pytest.raises(DataError, match=r"FRF data are exactly zero on lines where the model responds"):
-        est.fit(FRFData(freq, h, good.input_names, good.output_names))
+        est.estimate(FRFData(freq, h, good.input_names, good.output_names))
 
 
 def test_no_warning_on_a_clean_fit(rig):
@@ -313,4 +313,4 @@ def test_no_warning_on_a_clean_fit(rig):
     data = rig.system({"k12": 0.95 * 120e3}).frf(np.arange(50.0, 250.0), ["F1"], ["d1", "d2"])
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        assert est.fit(data).success
+        assert est.estimate(data).success

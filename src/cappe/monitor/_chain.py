@@ -198,9 +198,10 @@ class Monitor:
             start = baseline.coefficients[0]
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            estimate = self.estimator.fit(frf, start)
+            estimate = self.estimator.estimate(frf, start)
         notes += [f"fast path: {w.message}" for w in caught]
-        freq = damp = np.full(len(self.mode_numbers), np.nan)
+        freq = np.full(len(self.mode_numbers), np.nan)
+        damp = np.full(len(self.mode_numbers), np.nan)
         if modal:
             freq, damp, modal_notes = modal_features(frf, band=self.config.band,
                                                      expected=self.expected_modes(estimate.log_factor),
@@ -222,7 +223,7 @@ class Monitor:
         start = np.array([fast.log_factor[index[comp]] for comp, _ in self._slow_groups])
         with warnings.catch_warnings():
             warnings.simplefilter("ignore")  # a weakly identifiable single parameter is reported, not raised
-            return self.slow_estimator.fit(frf, start)
+            return self.slow_estimator.estimate(frf, start)
 
     # -- baseline ------------------------------------------------------------------------------------------
     def learn_baseline(
@@ -455,7 +456,7 @@ def learn_store_baseline(
     feats = feats[feats["measurement_id"].isin(ids)]
     per_measurement = [dict(zip(g["name"], g["value"], strict=True)) for _, g in feats.groupby("measurement_id")]
     frfs = [f for f in (store.frf(i) for i in ids) if f is not None]
-    analyses_free = learn_baseline(
+    baseline = learn_baseline(
         log_factors,
         names=names,
         conditions=[r.conditions for r in records],
@@ -465,7 +466,7 @@ def learn_store_baseline(
         measurement_ids=ids,
         preload_map=mon._preload_map(),
     )
-    store.set_baseline(machine, analyses_free.to_dict())
+    store.set_baseline(machine, baseline.to_dict())
     with store.transaction(machine) as tx:
-        tx.set_state({"baseline": analyses_free.created, "detector": None, "active": {}, "count": 0})
-    return analyses_free
+        tx.set_state({"baseline": baseline.created, "detector": None, "active": {}, "count": 0})
+    return baseline

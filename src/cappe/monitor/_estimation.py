@@ -115,6 +115,10 @@ def _roughness(log_h: CArray, weights: Array) -> float:
 class FactorEstimator:
     """Fit group stiffness factors of a model to measured FRFs (see the module notes).
 
+    Not a scikit-learn-style estimator: it is built once per machine (the model's input and output matrices,
+    the weights of the last line grid and the start point's Jacobian are kept) and :meth:`estimate` returns a
+    :class:`FactorEstimate` per measurement, so one instance serves a stream of measurements.
+
     Parameters
     ----------
     model : NumericModel
@@ -137,7 +141,7 @@ class FactorEstimator:
     >>> rig = NumericModel(load_model("builtin:two-mass-rig"))
     >>> data = rig.system({"k12": 0.9 * 120e3}).frf(np.arange(50.0, 250.0), ["F1"], ["d1", "d2"])
     >>> est = FactorEstimator(rig, {"coupling": ["k12"], "base": ["k11"]}, inputs=["F1"],
-    ...                       outputs=["d1", "d2"], band=(50, 250)).fit(data)
+    ...                       outputs=["d1", "d2"], band=(50, 250)).estimate(data)
     >>> np.round(est.factor, 6).tolist()
     [0.9, 1.0]
     """
@@ -278,7 +282,7 @@ class FactorEstimator:
             raise DataError(msg)
         return freq[keep], h
 
-    def fit(
+    def estimate(
         self,
         data: FRFData,
         start: ArrayLike | None = None,
