@@ -135,13 +135,14 @@ def _monitoring(args: argparse.Namespace, data: dict[str, object]) -> list[str]:
     lines = ["== spindle monitoring (Nickel 1999, Fig. 1.1): hammer FRFs every 15 min, 1 % noise ==",
              f"baseline from {len(healthy)} healthy measurements (one day, 22 +- 4 degC): the front-bearing factor "
              f"swings {100 * raw:.1f} % with the temperature, {100 * baseline.std[0]:.4f} % once compensated"]
-    cases = [("bearing-loss", {"component": "front", "severity": 0.10}, "front bearing loses 10 %"),
-             ("preload-loss", {"severity": 0.40}, "bearing preload drops 40 %"),
-             ("loosening-screw", {"component": "screw2", "severity": 0.50}, "housing screw 2 loosens to 50 %")]
+    cases = [("bearing-loss", "front", 0.10, "front bearing loses 10 %"),
+             ("preload-loss", None, 0.40, "bearing preload drops 40 %"),
+             ("loosening-screw", "screw2", 0.50, "housing screw 2 loosens to 50 %")]
     found = []
-    for k, (scenario, options, words) in enumerate(cases):
-        measurements = simulate_scenario(config, scenario, n=12, fault_at=2, model=model, rng=args.seed + 1 + k,
-                                         start=healthy[-1].timestamp + timedelta(days=1 + k), **options)
+    for k, (scenario, component, severity, words) in enumerate(cases):
+        measurements = simulate_scenario(config, scenario, n=12, fault_at=2, component=component, severity=severity,
+                                         model=model, rng=args.seed + 1 + k,
+                                         start=healthy[-1].timestamp + timedelta(days=1 + k))
         lines.append(f"{words} from measurement 2:")
         state = None
         for m in measurements:
