@@ -62,6 +62,9 @@ class Baseline:
         Frequency-damping map over the preload (thesis Fig. 5.30) for the dashboard.
     created : str
         ISO time of learning.
+    sigma : float, optional
+        Median residual of the healthy fits: how well the model describes this machine (model error included);
+        later fits are judged against it.
     """
 
     names: tuple[str, ...]
@@ -77,6 +80,7 @@ class Baseline:
     features: dict[str, tuple[float, float]] = field(default_factory=dict)
     map: dict[str, Any] | None = None
     created: str = ""
+    sigma: float | None = None
 
     def _design(self, conditions: Mapping[str, float] | None) -> Array:
         values = []
@@ -126,6 +130,7 @@ class Baseline:
             "coefficients": self.coefficients.tolist(),
             "covariance": self.covariance.tolist(),
             "resolution": self.resolution,
+            "sigma": self.sigma,
             # the view for people and the dashboard: factors at the centre of the conditions
             "mean": {n: float(v) for n, v in zip(self.names, mean, strict=True)},
             "std": {n: float(m * s) for n, m, s in zip(self.names, mean, self.std, strict=True)},
@@ -156,6 +161,7 @@ class Baseline:
                 features={k: (float(v[0]), float(v[1])) for k, v in data.get("features", {}).items()},
                 map=data.get("map"),
                 created=str(data.get("created", "")),
+                sigma=None if data.get("sigma") is None else float(data["sigma"]),
             )
         except (KeyError, TypeError, ValueError) as exc:
             msg = f"baseline is malformed: {type(exc).__name__} {exc}"
@@ -192,6 +198,7 @@ def learn_baseline(
     resolution: float = 0.005,
     measurement_ids: Sequence[int] = (),
     preload_map: Mapping[str, Any] | None = None,
+    sigma: float | None = None,
 ) -> Baseline:
     """Learn a :class:`Baseline` from healthy measurements.
 
@@ -212,6 +219,8 @@ def learn_baseline(
         See the module notes.
     measurement_ids : sequence of int
     preload_map : mapping, optional
+    sigma : float, optional
+        Median residual of the healthy fits (see :attr:`Baseline.sigma`).
 
     Raises
     ------
@@ -280,4 +289,5 @@ def learn_baseline(
         features=feature_stats,
         map=dict(preload_map) if preload_map else None,
         created=datetime.now(UTC).isoformat(),
+        sigma=sigma,
     )

@@ -196,9 +196,12 @@ class Monitor:
         notes = [f"pre-processing: {w.message}" for w in caught]
         if start is None and baseline is not None:
             start = baseline.coefficients[0]
+        # before a baseline exists the measurements are the healthy reference: no misfit check; afterwards a
+        # fit is judged against the healthy fits' residual, which includes the model's error for this machine
+        check = {"misfit_ratio": None} if baseline is None else {"misfit_level": baseline.sigma}
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
-            estimate = self.estimator.estimate(frf, start)
+            estimate = self.estimator.estimate(frf, start, **check)
         notes += [f"fast path: {w.message}" for w in caught]
         freq = np.full(len(self.mode_numbers), np.nan)
         damp = np.full(len(self.mode_numbers), np.nan)
@@ -251,6 +254,7 @@ class Monitor:
             resolution=resolution,
             measurement_ids=measurement_ids,
             preload_map=self._preload_map(),
+            sigma=float(np.median([a.estimate.sigma for a in analyses])),
         )
 
     def _band(self, frf: FRFData) -> FRFData:
@@ -465,8 +469,16 @@ def learn_store_baseline(
         resolution=resolution,
         measurement_ids=ids,
         preload_map=mon._preload_map(),
+        sigma=_median_fit_sigma(records),
     )
     store.set_baseline(machine, baseline.to_dict())
     with store.transaction(machine) as tx:
         tx.set_state({"baseline": baseline.created, "detector": None, "active": {}, "count": 0})
     return baseline
+
+
+def _median_fit_sigma(records: Sequence[Any]) -> float | None:
+    """Median residual of the recorded fast-path fits (kept in each measurement's meta by :func:`ingest`)."""
+    values = [float(r.meta["fit"]["sigma"]) for r in records if isinstance(r.meta.get("fit"), Mapping)
+              and r.meta["fit"].get("sigma") is not None]
+    return float(np.median(values)) if values else None

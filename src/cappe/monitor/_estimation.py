@@ -289,6 +289,7 @@ class FactorEstimator:
         *,
         max_iter: int = 50,
         misfit_ratio: float | None = 5.0,
+        misfit_level: float | None = None,
     ) -> FactorEstimate:
         """Levenberg-Marquardt fit of the log-factors to ``data`` (from ``start``, default 0 = the reference).
 
@@ -302,7 +303,10 @@ class FactorEstimator:
         noise the data show on their own (the spread of second differences of ``ln H`` along frequency, a
         model-free estimate): beyond ``misfit_ratio`` times that, it restarts from points around the first
         result (each group 20 % and 40 % lower and 25 % higher) and keeps the best; if even that misfits, the
-        result has ``success=False`` (a local minimum, or a model that does not describe the data). A
+        result has ``success=False`` (a local minimum, or a model that does not describe the data). A model of a
+        real machine never fits to the noise; ``misfit_level``, the residual of good fits (a monitor's healthy
+        baseline), replaces the noise as the reference when it is larger. ``misfit_ratio=None`` turns the check
+        off. A
         rank-deficient Jacobian or no convergence also gives ``success=False``; every failure warns
         (`ConvergenceWarning`).
         """
@@ -320,7 +324,7 @@ class FactorEstimator:
             raise DataError(msg)
         best = self._solve(freq, h_meas, weights, s0, max_iter)
         dof = max(2 * int(used.sum()) - n, 1)
-        noise = _roughness(np.log(h_meas), weights)
+        noise = max(_roughness(np.log(h_meas), weights), misfit_level or 0.0)
         limit = np.inf if misfit_ratio is None else misfit_ratio * noise
         if np.sqrt(2.0 * best[1] / dof) > limit:
             for g in range(n):
@@ -342,8 +346,9 @@ class FactorEstimator:
             message = f"{message}; Jacobian rank {rank} < {n} groups (not all identifiable from these channels)"
         if np.sqrt(sigma2) > limit:
             success = False
-            message = (f"{message}; residual {np.sqrt(sigma2):.3g} is {np.sqrt(sigma2) / noise:.3g} times the noise "
-                       f"the data show ({noise:.3g}): a local minimum or a model that does not describe the data")
+            message = (f"{message}; residual {np.sqrt(sigma2):.3g} is {np.sqrt(sigma2) / noise:.3g} times the "
+                       f"reference misfit {noise:.3g} (the noise the data show, or the healthy fits' residual): a "
+                       f"local minimum or a model that does not describe the data")
         if not success:
             warnings.warn(f"stiffness-factor fit: {message}", ConvergenceWarning, stacklevel=2)
         return FactorEstimate(self.names, s, np.asarray(covariance, dtype=float), cost, float(np.sqrt(sigma2)),
