@@ -20,6 +20,7 @@ so results do not depend on the chunk size, the number of workers or where the c
 from __future__ import annotations
 
 import os
+import sys
 import threading
 from collections.abc import Callable, Iterator, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
@@ -34,6 +35,8 @@ T = TypeVar("T")
 
 _LIMITER: Any = None
 _USERS = 0
+_CONTROLLER: ThreadpoolController | None = None
+_CONTROLLER_MODULES = -1  # len(sys.modules) when _CONTROLLER scanned the loaded libraries
 _PIN_LOCK = threading.Lock()
 
 
@@ -77,11 +80,16 @@ def single_threaded_blas() -> Iterator[None]:
     The limit is process-wide, so the block counts its users: threads may enter and leave it in any order,
     and the original limits come back when the last one leaves.
     """
-    global _LIMITER, _USERS
+    global _LIMITER, _USERS, _CONTROLLER, _CONTROLLER_MODULES
     with _PIN_LOCK:
         if _USERS == 0:
-            # a fresh scan: a BLAS loaded since the last one (scipy's own OpenBLAS, say) is limited too
-            _LIMITER = ThreadpoolController().limit(limits=1, user_api="blas")
+            # a fresh scan whenever modules were imported since the last one, so that a BLAS loaded meanwhile
+            # (scipy's own OpenBLAS, say) is limited too; otherwise the last scan (scanning costs milliseconds,
+            # and the serial stages enter here once per model evaluation)
+            if _CONTROLLER is None or len(sys.modules) != _CONTROLLER_MODULES:
+                _CONTROLLER = ThreadpoolController()
+                _CONTROLLER_MODULES = len(sys.modules)
+            _LIMITER = _CONTROLLER.limit(limits=1, user_api="blas")
         _USERS += 1
     try:
         yield

@@ -177,7 +177,7 @@ def macxp(phi_a: ArrayLike, lam_a: ArrayLike, phi_x: ArrayLike, lam_x: ArrayLike
     a, x = _shape_sets(phi_a, phi_x)
     la = as_poles(lam_a, "lam_a", a.shape[1], "phi_a")
     lx = as_poles(lam_x, "lam_x", x.shape[1], "phi_x")
-    return _macxp_core(a.conj().T @ x, a.T @ x, _column_terms(a, la, 1), _column_terms(x, lx, 0))
+    return _macxp_core(np.abs(a.conj().T @ x), np.abs(a.T @ x), _column_terms(a, la, 1), _column_terms(x, lx, 0))
 
 
 def macxp_paired(
@@ -215,7 +215,7 @@ def macxp_paired(
     x = np.asarray(phi_x)
     cross_h = np.sum(a.conj() * x, axis=-2)
     cross_t = np.sum(a * x, axis=-2)
-    return _macxp_core(cross_h, cross_t, _column_terms(a, np.asarray(lam_a), None),
+    return _macxp_core(np.abs(cross_h), np.abs(cross_t), _column_terms(a, np.asarray(lam_a), None),
                        _column_terms(x, np.asarray(lam_x), None))
 
 
@@ -253,13 +253,22 @@ def macxp_batch(
     a = np.asarray(phi_a)
     x = np.asarray(phi_x)
     at = np.swapaxes(a, -1, -2)
-    cross_t = np.swapaxes(at @ x, -1, -2)  # (B, m_x, m_a)
-    cross_h = cross_t if not np.iscomplexobj(a) else np.swapaxes(at.conj() @ x, -1, -2)
+    if np.iscomplexobj(a):
+        abs_t = np.abs(np.swapaxes(at @ x, -1, -2))  # (B, m_x, m_a)
+        abs_h = np.abs(np.swapaxes(at.conj() @ x, -1, -2))
+    elif np.iscomplexobj(x):
+        # real shapes against complex ones: a^H x = a^T x, from one real product with [Re x, Im x] (promoting
+        # the batch to complex would cost a copy and four times the flops)
+        m_x = x.shape[1]
+        both = np.swapaxes(at @ np.concatenate([x.real, x.imag], axis=1), -1, -2)  # (B, 2 m_x, m_a)
+        abs_t = abs_h = np.sqrt(np.square(both[:, :m_x]) + np.square(both[:, m_x:]))
+    else:
+        abs_t = abs_h = np.abs(np.swapaxes(at @ x, -1, -2))
     s_a, pole_a, den_a, root_a = _column_terms(a, np.asarray(lam_a), None)  # (B, m_a)
     s_x, pole_x, den_x, root_x = _column_terms(x, np.asarray(lam_x), None)  # (m_x,)
     terms_a = (s_a[:, None, :], pole_a[:, None, :], den_a[:, None, :], root_a[:, None, :])
     terms_x = (s_x[:, None], pole_x[:, None], den_x[:, None], root_x[:, None])
-    return _macxp_core(cross_h, cross_t, terms_a, terms_x)
+    return _macxp_core(abs_h, abs_t, terms_a, terms_x)
 
 
 def _column_terms(
@@ -271,8 +280,12 @@ def _column_terms(
     """
     s = np.abs(lam.real)
     pole = -s + 1j * lam.imag
-    norm = np.sum(np.abs(phi) ** 2, axis=-2)
-    den = norm + np.abs(np.sum(phi * phi, axis=-2)) * s / np.abs(pole)
+    if np.iscomplexobj(phi):
+        norm = np.sum(np.abs(phi) ** 2, axis=-2)
+        den = norm + np.abs(np.sum(phi * phi, axis=-2)) * s / np.abs(pole)
+    else:  # phi^T phi = phi^H phi
+        norm = np.einsum("...ij,...ij->...j", phi, phi)
+        den = norm * (1.0 + s / np.abs(pole))
     if outer == 1:
         return s[:, np.newaxis], pole[:, np.newaxis], den[:, np.newaxis], np.sqrt(s)[:, np.newaxis]
     if outer == 0:
@@ -281,29 +294,43 @@ def _column_terms(
 
 
 def _macxp_core(
-    cross_h: NDArray[Any],
-    cross_t: NDArray[Any],
+    abs_h: NDArray[np.float64],
+    abs_t: NDArray[np.float64],
     terms_a: tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]],
     terms_x: tuple[NDArray[Any], NDArray[Any], NDArray[Any], NDArray[Any]],
 ) -> NDArray[np.float64]:
-    """MACXP multiplied through by 4 s_a s_x, which stays finite for undamped poles."""
-    _, la, den_a, root_a = terms_a
-    _, lx, den_x, root_x = terms_x
+    """MACXP multiplied through by 4 s_a s_x, which stays finite for undamped poles.
+
+    ``abs_h`` and ``abs_t`` are ``|a^H x|`` and ``|a^T x|`` (the same array for real shapes).
+    """
+    s_a, la, den_a, root_a = terms_a
+    s_x, lx, den_x, root_x = terms_x
     # 2 sqrt(s_a s_x) / |conj(lam_a) + lam_x| and 2 sqrt(s_a s_x) / |lam_a + lam_x|: both <= 1 because
     # |Re(...)| = s_a + s_x >= 2 sqrt(s_a s_x); a zero distance only occurs for coinciding undamped poles,
-    # whose limit (equal damping) is 1.
-    root = 2.0 * root_a * root_x
-    dist_h = np.abs(la.conj() + lx)
-    dist_t = np.abs(la + lx)
-    root, dist_h, dist_t = np.broadcast_arrays(root, dist_h, dist_t)
-    weight_h = np.ones(root.shape)
-    weight_t = np.ones(root.shape)
+    # whose limit (equal damping) is 1. In real arithmetic: Re(...) = -(s_a + s_x), Im = Im lam_x -+ Im lam_a.
+    decay2 = np.square(s_a + s_x)
+    dist_h = np.sqrt(decay2 + np.square(lx.imag - la.imag))
+    dist_t = np.sqrt(decay2 + np.square(lx.imag + la.imag))
+    shape = np.broadcast_shapes(dist_h.shape, abs_h.shape, abs_t.shape, np.shape(den_a), np.shape(den_x))
+    root = np.broadcast_to(2.0 * root_a * root_x, shape)
+    weight_h = np.ones(shape)
+    weight_t = np.ones(shape)
     np.divide(root, dist_h, out=weight_h, where=dist_h > 0)
     np.divide(root, dist_t, out=weight_t, where=dist_t > 0)
-    weight_h = np.minimum(weight_h, 1.0)
-    weight_t = np.minimum(weight_t, 1.0)
-    num = (weight_h * np.abs(cross_h) + weight_t * np.abs(cross_t)) ** 2
-    return np.asarray(num / (den_a * den_x), dtype=np.float64)
+    np.minimum(weight_h, 1.0, out=weight_h)
+    np.minimum(weight_t, 1.0, out=weight_t)
+    if abs_h is abs_t:
+        weight_h += weight_t
+        num = weight_h
+        num *= abs_h
+    else:
+        num = weight_h
+        num *= abs_h
+        weight_t *= abs_t
+        num += weight_t
+    np.square(num, out=num)
+    num /= den_a * den_x
+    return num
 
 
 def _relative_difference(

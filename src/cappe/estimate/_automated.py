@@ -61,7 +61,7 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.optimize import lsq_linear
 
 from cappe._rng import RandomLike
-from cappe.correlate import macxp_paired
+from cappe.correlate import macxp_batch
 from cappe.estimate._base import _LAST_FIT, Estimator, fit_least_squares
 from cappe.estimate._modal_updating import ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
@@ -176,11 +176,12 @@ def _constant_derivatives(model: NumericModel, position: Mapping[str, float],
     subproblem's Jacobian then needs no matrix assembly per sample (else it differentiates the batch centrally).
     """
     base = model.nominal
-    first = model.matrix_derivatives(base, position, names=("K", "M"))
-    second = model.matrix_derivatives(base * 1.37, position, names=("K", "M"))
+    searched = [model.parameter_names[c] for c in columns]
+    first = model.matrix_derivatives(base, position, names=("K", "M"), parameters=searched)
+    second = model.matrix_derivatives(base * 1.37, position, names=("K", "M"), parameters=searched)
     out = []
     for name in ("K", "M"):
-        a, b = first[name][columns], second[name][columns]
+        a, b = first[name], second[name]
         if not np.allclose(a, b, rtol=1e-12, atol=1e-12 * max(float(np.abs(a).max()), 1e-300)):
             return None
         out.append(a)
@@ -202,6 +203,33 @@ def _mode_problem(
     pole_ref = data_set.poles[mode]
     sw_f, sw_s = np.sqrt(weights[0]), np.sqrt(weights[1])
     constant = _constant_derivatives(model, position, columns)
+    stacked: tuple[Array, Array] | None = None
+    if constant is not None:
+        # (n, n_search * n): row j, column (i, l) holds dK_i[l, j], so phi_k @ stacked = (dK_i phi_k)_l for every i
+        n_dof = model.n_dof
+        stacked = (np.ascontiguousarray(constant[0].transpose(2, 0, 1).reshape(n_dof, -1)),
+                   np.ascontiguousarray(constant[1].transpose(2, 0, 1).reshape(n_dof, -1)))
+
+    def derivative_products(p: Array, phi_k: Array, lam: Array) -> tuple[Array, Array]:
+        """``(dK_i - lam dM_i) phi_k`` and ``dM_i phi_k`` for every searched parameter i: (B, n_search, n) each."""
+        b, n = phi_k.shape
+        if stacked is not None:  # K and M linear in the searched parameters: constant derivatives, one product
+            dm_phi = (phi_k @ stacked[1]).reshape(b, columns.size, n)
+            g = (phi_k @ stacked[0]).reshape(b, columns.size, n) - lam[:, None, None] * dm_phi
+            return g, dm_phi
+        g, dm_phi = np.empty((b, columns.size, n)), np.empty((b, columns.size, n))
+        for i, col in enumerate(columns):  # central differences of the batch's matrices
+            h = _STEP * np.maximum(np.abs(p[:, col]), 1e-300)
+            hi, lo = p.copy(), p.copy()
+            hi[:, col] += h
+            lo[:, col] -= h
+            m_hi = model.matrices(hi, position, names=("M", "K"))
+            m_lo = model.matrices(lo, position, names=("M", "K"))
+            dk = (m_hi["K"] - m_lo["K"]) / (2 * h)[:, None, None]
+            dm = (m_hi["M"] - m_lo["M"]) / (2 * h)[:, None, None]
+            dm_phi[:, i] = (dm @ phi_k[:, :, None])[:, :, 0]
+            g[:, i] = (dk @ phi_k[:, :, None])[:, :, 0] - lam[:, None] * dm_phi[:, i]
+        return g, dm_phi
 
     def evaluate(p: Array) -> tuple[Array, Array]:
         b = p.shape[0]
@@ -210,7 +238,7 @@ def _mode_problem(
         assert phi is not None  # full_shapes=True
         valid = freq > 0
         poles = np.where(valid, batch.first_order_poles, 1j)
-        crit = macxp_paired(a_all, poles, x[:, None], np.asarray(pole_ref))
+        crit = macxp_batch(a_all, poles, x[:, None], np.asarray(pole_ref)[None])[:, 0, :]
         k = np.argmax(np.where(valid, crit, -1.0), axis=1)
         rows = np.arange(b)
         lam_all = (2 * np.pi * freq) ** 2
@@ -222,40 +250,30 @@ def _mode_problem(
         aa = np.sum(a * a, axis=1)
         e = a * (c / aa)[:, None] - x[None, :]
         res = np.concatenate([(sw_f * (f - f_ref) / f_ref)[:, None], sw_s * e.real, sw_s * e.imag], axis=1)
-        jac = np.empty((b, res.shape[1], columns.size))
-        n = phi.shape[1]
-        own = np.arange(n)[None, :] == k[:, None]
+        # modal expansion of the derivatives, all searched parameters at once (axis 1 of the (B, n_search, .) arrays)
+        m = phi.shape[2]
+        own = np.arange(m)[None, :] == k[:, None]
         denom = lam[:, None] - lam_all
         scale = np.maximum(lam_all.max(axis=1, keepdims=True), 1e-300)
         skip = own | (np.abs(denom) <= _REPEATED * scale)
         safe = np.where(skip, 1.0, denom)
         omega = np.sqrt(lam)
-        for i, col in enumerate(columns):
-            if constant is not None:  # K and M linear in this parameter: one (n, n) derivative for the batch
-                dm_phi = phi_k @ constant[1][i].T
-                g = phi_k @ constant[0][i].T - lam[:, None] * dm_phi
-            else:
-                h = _STEP * np.maximum(np.abs(p[:, col]), 1e-300)
-                hi, lo = p.copy(), p.copy()
-                hi[:, col] += h
-                lo[:, col] -= h
-                m_hi = model.matrices(hi, position, names=("M", "K"))
-                m_lo = model.matrices(lo, position, names=("M", "K"))
-                dk = (m_hi["K"] - m_lo["K"]) / (2 * h)[:, None, None]
-                dm = (m_hi["M"] - m_lo["M"]) / (2 * h)[:, None, None]
-                dm_phi = np.einsum("bij,bj->bi", dm, phi_k)
-                g = np.einsum("bij,bj->bi", dk, phi_k) - lam[:, None] * dm_phi
-            proj = np.einsum("bis,bi->bs", phi, g)  # phi_s^T (dK - lam dM) phi_k
-            d_lam = proj[rows, k]
-            coef = np.where(skip, 0.0, proj / safe)
-            coef[rows, k] = -0.5 * np.sum(phi_k * dm_phi, axis=1)
-            da = np.einsum("bsn,bn->bs", a_all, coef)
-            d_f = d_lam / (2 * omega) / (2 * np.pi)
-            dc = da @ x
-            daa = 2 * np.sum(a * da, axis=1)
-            de = da * (c / aa)[:, None] + a * (dc / aa)[:, None] - a * (c * daa / aa**2)[:, None]
-            jac[:, 0, i] = sw_f * d_f / f_ref
-            jac[:, 1:, i] = np.concatenate([sw_s * de.real, sw_s * de.imag], axis=1)
+        g, dm_phi = derivative_products(p, phi_k, lam)
+        proj = g @ phi  # (B, n_search, m): phi_s^T (dK_i - lam dM_i) phi_k
+        d_lam = proj[rows, :, k]  # (B, n_search)
+        coef = np.where(skip[:, None, :], 0.0, proj / safe[:, None, :])
+        coef[rows, :, k] = -0.5 * (dm_phi @ phi_k[:, :, None])[:, :, 0]
+        da = coef @ np.swapaxes(a_all, 1, 2)  # (B, n_search, n_s)
+        d_f = d_lam / (2 * omega[:, None]) / (2 * np.pi)
+        dc = da @ x  # (B, n_search)
+        daa = 2 * (da @ a[:, :, None])[:, :, 0]
+        de = (da * (c / aa)[:, None, None] + a[:, None, :] * (dc / aa[:, None])[:, :, None]
+              - a[:, None, :] * (c[:, None] * daa / aa[:, None] ** 2)[:, :, None])  # (B, n_search, n_s)
+        jac = np.empty((b, res.shape[1], columns.size))
+        jac[:, 0, :] = sw_f * d_f / f_ref
+        n_s = x.size
+        jac[:, 1:1 + n_s, :] = sw_s * np.swapaxes(de.real, 1, 2)
+        jac[:, 1 + n_s:, :] = sw_s * np.swapaxes(de.imag, 1, 2)
         return res, jac
 
     return evaluate
@@ -346,8 +364,9 @@ def solve_subproblem(
             break
         iterations += 1
         ju = j[idx] * p[idx][:, columns][:, None, :]  # dr/du = dr/dp * p
-        g = np.einsum("bri,br->bi", ju, r[idx])
-        hess = np.einsum("bri,brj->bij", ju, ju)
+        jut = np.swapaxes(ju, 1, 2)
+        g = (jut @ r[idx][:, :, None])[:, :, 0]
+        hess = jut @ ju
         ui = u[idx]
         blocked = ((ui <= lo + 1e-12) & (g > 0)) | ((ui >= hi - 1e-12) & (g < 0))
         diag = np.diagonal(hess, axis1=1, axis2=2)
@@ -1241,7 +1260,7 @@ class ExactModalProblem:
         """Jacobian rows of set ``k`` at the full parameter vector ``full`` (paired model poles given)."""
         model, position = self.model, self.positions[k]
         mats = model.matrices(full, position)
-        dmats = model.matrix_derivatives(full, position)
+        dmats = model.matrix_derivatives(full, position, parameters=[model.parameter_names[c] for c in columns])
         n = model.n_dof
         stiff = mats["K"] + 1j * mats["H"]
         visc = mats["C"] + mats["G"]
@@ -1275,11 +1294,11 @@ class ExactModalProblem:
         v_q, v_v = vec[:n, idx], vec[n:, idx]  # displacement and velocity parts of the paired eigenvectors
         minv_stiff_vq = minv @ (stiff @ v_q)
         minv_visc_vv = minv @ (visc @ v_v)
-        for col in columns:
-            d_low = (dmats["K"][col] + 1j * dmats["H"][col]) @ v_q
-            d_low += (dmats["C"][col] + (dmats["G"][col] if "G" in dmats else 0.0)) @ v_v
-            if np.any(dmats["M"][col]):
-                d_low -= dmats["M"][col] @ (minv_stiff_vq + minv_visc_vv)
+        for i in range(len(columns)):  # dmats hold the derivatives with respect to ``columns`` only, in order
+            d_low = (dmats["K"][i] + 1j * dmats["H"][i]) @ v_q
+            d_low += (dmats["C"][i] + (dmats["G"][i] if "G" in dmats else 0.0)) @ v_v
+            if np.any(dmats["M"][i]):
+                d_low -= dmats["M"][i] @ (minv_stiff_vq + minv_visc_vv)
             g = -(w_low @ d_low)  # (2n, m): (W dA V)_{s r}
             d_lam = g[idx, np.arange(idx.size)]
             coef = np.where(near, 0.0, g / safe_gap)

@@ -208,14 +208,19 @@ def model_receptance(
     s_in = rows[[index[c] for c in inputs]]
     mats = model.matrices(p, position)
     omega = 2 * np.pi * np.asarray(freq, dtype=float)
-    stiff = mats["K"] + 1j * mats["H"]
-    damp = mats["C"] + mats["G"]
-    dyn = stiff[None] + 1j * omega[:, None, None] * damp[None] - omega[:, None, None] ** 2 * mats["M"][None]
+    # the dynamic stiffness, real and imaginary parts written in place (no (n_f, n, n) complex temporaries)
+    dyn = np.empty((omega.size, *mats["K"].shape), dtype=complex)
+    np.multiply(-(omega**2)[:, None, None], mats["M"], out=dyn.real)
+    dyn.real += mats["K"]
+    np.multiply(omega[:, None, None], mats["C"] + mats["G"], out=dyn.imag)
+    dyn.imag += mats["H"]
     n, n_in = s_in.shape[1], s_in.shape[0]
     x = np.linalg.solve(dyn, np.broadcast_to(s_in.T.astype(complex), (omega.size, n, n_in)))  # (n_f, n, n_in)
-    # one GEMM over all lines (a broadcast real @ complex matmul takes numpy's slow non-BLAS loop)
-    h = s_out.astype(complex) @ np.transpose(x, (1, 0, 2)).reshape(n, -1)  # (n_out, n_f * n_in)
-    return np.ascontiguousarray(np.transpose(h.reshape(-1, omega.size, n_in), (0, 2, 1)))
+    # one real GEMM over all lines, on the interleaved real and imaginary parts of x laid out (n, n_in, n_f), which
+    # gives H[out, in, freq] in place (a broadcast real @ complex matmul takes numpy's slow non-BLAS loop)
+    x_t = np.ascontiguousarray(np.transpose(x, (1, 2, 0))).reshape(n, -1).view(np.float64)  # (n, 2 n_in n_f)
+    h = (s_out @ x_t).view(complex)  # (n_out, n_in * n_f)
+    return h.reshape(s_out.shape[0], n_in, omega.size)
 
 
 @functools.lru_cache(maxsize=2)
@@ -234,19 +239,22 @@ def _frf_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
     The formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf` (one output per FRF), written
     with row-wise inner products so that 81 x 81 FRFs of 600 lines need no temporaries of their size.
     """
-    power_ref = np.einsum("oif,oif->oi", h_ref.conj(), h_ref).real
+    power_ref = np.vecdot(h_ref, h_ref).real  # vecdot conjugates its first argument, without a copy
     keep = power_ref > NEGLIGIBLE_POWER * power_ref.max()
     frac_v = np.full(power_ref.shape, np.nan)
     csf_v = np.full(power_ref.shape, np.nan)
     if np.any(keep):
         a, x = h_mod[keep], h_ref[keep]  # (n_keep, n_freq)
-        power_a = np.einsum("kf,kf->k", a.conj(), a).real
-        cross = np.abs(np.einsum("kf,kf->k", x.conj(), a)) ** 2
+        power_a = np.vecdot(a, a).real
+        cross = np.abs(np.vecdot(x, a)) ** 2
         frac_v[keep] = cross / (power_a * power_ref[keep])
         mag_a, mag_x = np.abs(a), np.abs(x)
-        den = mag_a**2 + mag_x**2
+        den = np.square(mag_a)
+        den += np.square(mag_x)
+        mag_a *= mag_x
+        mag_a *= 2.0
         line = np.ones(den.shape)  # both zero at a line: equal there
-        np.divide(2.0 * mag_a * mag_x, den, out=line, where=den > 0)
+        np.divide(mag_a, den, out=line, where=den > 0)
         csf_v[keep] = np.mean(line, axis=-1)
     return frac_v, csf_v
 

@@ -124,7 +124,7 @@ def derivatives(
         raise ModelError(msg)
     sel = [model.parameter_names.index(name) for name in names]
     mats = model.matrices(p, position, names=("M", "K", "C", "G", "H"))
-    dmats = {k: v[sel] for k, v in model.matrix_derivatives(p, position, names=("M", "K", "C", "H")).items()}
+    dmats = model.matrix_derivatives(p, position, names=("M", "K", "C", "H"), parameters=names)
     n = model.n_dof
     # only the undamped eigen-solution (with its PSD checks) is needed: no inputs or outputs
     system = MechanicalSystem(M=mats["M"], C=mats["C"], K=mats["K"], G=mats["G"], H=mats["H"],

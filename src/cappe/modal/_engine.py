@@ -330,7 +330,9 @@ class ModalEngine:
 
         def cat(name: str) -> Any:
             values = [getattr(c, name) for c in chunks]
-            return None if values[0] is None else np.concatenate(values, axis=0)
+            if values[0] is None or len(values) == 1:  # a single chunk's arrays are its own: no copy
+                return values[0]
+            return np.concatenate(values, axis=0)
 
         return ModalBatch(
             frequency=cat("frequency"),
@@ -405,7 +407,7 @@ class ModalEngine:
             index = np.broadcast_to(np.arange(m_out), (b, m_out)).copy()
             mac = None
         omega = np.sqrt(lam)
-        sources = model.damping_sources(pb, position)
+        sources = model.damping_sources(pb, position, jacobian=contributions)
         zeta, contrib, gradient = _first_order_damping(sources, phi, omega, contributions)
         sensor_rows = self._sensor_rows(position)[1]
         shapes = phi.copy() if self._dof_channels else sensor_rows @ phi
@@ -548,18 +550,29 @@ def _first_order_damping(
     b, _, m = phi.shape
     if not sources.names:
         zeros = np.zeros((b, m))
-        return zeros, (np.zeros((b, m, 0)) if contributions else None), (
-            np.zeros((b, m, sources.jacobian.shape[2])) if contributions else None)
-    elong = sources.rows @ phi  # (B, n_src, m): modal elongation of each source
+        if not contributions:
+            return zeros, None, None
+        assert sources.jacobian is not None  # the engine asks for it with the contributions
+        return zeros, np.zeros((b, m, 0)), np.zeros((b, m, sources.jacobian.shape[2]))
+    elong2 = sources.rows @ phi  # (B, n_src, m): modal elongation of each source
+    np.square(elong2, out=elong2)
     rigid = omega == 0
     safe = np.where(rigid, 1.0, omega)
-    power = np.where(sources.hysteretic, 2.0, 1.0)  # (n_src,)
-    unit = elong**2 / (2 * safe[:, None, :] ** power[None, :, None])  # (B, n_src, m)
-    unit = np.where(rigid[:, None, :], 0.0, unit)
+    # 1 / (2 omega^k) per kind of source (no power of the (B, n_src, m) array); rigid modes get 0
+    per_kind = (np.where(rigid, 0.0, 0.5 / safe), np.where(rigid, 0.0, 0.5 / (safe * safe)))  # (B, m) each
+    hysteretic = sources.hysteretic
+    if not contributions:
+        # zeta = sum over the sources of each kind: one batched (1, n_src) @ (n_src, m) product per kind
+        zeta = np.zeros((b, m))
+        for kind, factor in zip((~hysteretic, hysteretic), per_kind, strict=True):
+            if np.any(kind):
+                coef = np.where(kind, sources.coefficients, 0.0)[:, None, :]  # (B, 1, n_src)
+                zeta += (coef @ elong2)[:, 0, :] * factor
+        return zeta, None, None
+    unit = elong2 * np.where(hysteretic[None, :, None], per_kind[1][:, None, :], per_kind[0][:, None, :])
     contrib = unit * sources.coefficients[:, :, None]
     zeta = contrib.sum(axis=1)
-    if not contributions:
-        return zeta, None, None
+    assert sources.jacobian is not None  # the engine asks for it with the contributions
     gradient = np.swapaxes(unit, 1, 2) @ sources.jacobian  # (B, m, n_params)
     return zeta, np.ascontiguousarray(np.swapaxes(contrib, 1, 2)), gradient
 

@@ -58,8 +58,8 @@ class DampingSources:
         c (N s/m or N m s/rad) or eta * k (N/m or N m/rad) per sample.
     rows : ndarray, shape (n_sources, n_dof) or (B, n_sources, n_dof)
         Elongation rows; per sample only when attachment points depend on parameters.
-    jacobian : ndarray, shape (B, n_sources, n_params)
-        Partial derivatives of the coefficients with respect to every model parameter.
+    jacobian : ndarray, shape (B, n_sources, n_params), or None
+        Partial derivatives of the coefficients with respect to every model parameter (None when not requested).
     """
 
     names: tuple[str, ...]
@@ -67,7 +67,7 @@ class DampingSources:
     kinds: tuple[str, ...]
     coefficients: Array
     rows: Array
-    jacobian: Array
+    jacobian: Array | None
 
     @property
     def hysteretic(self) -> NDArray[np.bool_]:
@@ -205,9 +205,12 @@ class NumericModel:
         self._source_jac = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
 
     def damping_sources(
-        self, params: ParamsLike = None, position: Mapping[str, float] | None = None
+        self, params: ParamsLike = None, position: Mapping[str, float] | None = None, *, jacobian: bool = True
     ) -> DampingSources:
         """The model's damping sources evaluated at a parameter vector or batch (see :class:`DampingSources`).
+
+        ``jacobian=False`` leaves out the coefficients' derivatives (a (B, n_sources, n_params) array that the
+        damping ratios alone do not need).
 
         Examples
         --------
@@ -224,8 +227,8 @@ class NumericModel:
         coef = np.empty((n_b, n_s))
         for j, v in enumerate(self._source_coef(*args) if n_s else []):
             coef[:, j] = v
-        jac = np.zeros((n_b, n_s, pb.shape[1]))
-        if self._source_jac_entries:
+        jac = np.zeros((n_b, n_s, pb.shape[1])) if jacobian else None
+        if jac is not None and self._source_jac_entries:
             for (j, i), v in zip(self._source_jac_entries, self._source_jac(*args), strict=True):
                 jac[:, j, i] = v
         rows: Array
@@ -374,14 +377,22 @@ class NumericModel:
         params: ParamsLike = None,
         position: Mapping[str, float] | None = None,
         names: Sequence[str] = MATRIX_NAMES,
+        *,
+        parameters: Sequence[str] | None = None,
     ) -> dict[str, Array]:
         """Exact partial derivatives of each matrix with respect to every parameter: (n_params, n, n).
+
+        With ``parameters``, only with respect to those, in that order: (len(parameters), n, n) (on models with
+        many parameters most of the work when few are wanted).
 
         Examples
         --------
         >>> from cappe.model import load_model
         >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
         >>> nm.matrix_derivatives()["K"][nm.parameter_names.index("k12")]
+        array([[ 1., -1.],
+               [-1.,  1.]])
+        >>> nm.matrix_derivatives(names=("K",), parameters=["k12"])["K"][0]
         array([[ 1., -1.],
                [-1.,  1.]])
         """
@@ -391,19 +402,29 @@ class NumericModel:
             raise ModelError(msg)
         pos = self.position_vector(position)
         n, n_p = self.n_dof, len(self.parameter_names)
+        if parameters is None:
+            sel = np.arange(n_p)
+        else:
+            unknown = [name for name in parameters if name not in self.parameter_names]
+            if unknown:
+                msg = f"unknown parameters {unknown} for model '{self.structure.name}'"
+                raise ModelError(msg)
+            sel = np.array([self.parameter_names.index(name) for name in parameters], dtype=np.intp)
         jac = np.zeros((self._n_coef, n_p))
         if self._jacobian_entries:
             values = self._jacobian_func(*p, *pos)
             for (j, i), v in zip(self._jacobian_entries, values, strict=True):
                 jac[j, i] = float(v)
+        jac = jac[:, sel]
         patterns = self._patterns(pos)
         out: dict[str, Array] = {}
         for name in names:
-            deriv = (jac[self._slices[name]].T @ patterns[name]).reshape(n_p, n, n)
+            deriv = (jac[self._slices[name]].T @ patterns[name]).reshape(sel.size, n, n)
             func = self._residual_derivative_funcs.get(name)
             if func is not None:
-                for i, mat in enumerate(func(*p, *pos)):
-                    deriv[i] += np.asarray(mat, dtype=float)
+                mats = func(*p, *pos)
+                for k, column in enumerate(sel):
+                    deriv[k] += np.asarray(mats[column], dtype=float)
             out[name] = deriv
         return out
 

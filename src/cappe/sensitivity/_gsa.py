@@ -141,7 +141,7 @@ def model_sobol(
     criteria: Sequence[str] = CRITERIA,
     exact: bool = False,
     n_workers: int | None = None,
-    chunk_size: int = 256,
+    chunk_size: int = 64,
     n_resamples: int = 100,
     executor: Executor | str | None = None,
     progress: bool = False,
@@ -167,7 +167,9 @@ def model_sobol(
         Use exact complex modes of the model (default: undamped real shapes with first-order poles, which
         is the light-damping assumption A1 of the paper and several times faster).
     n_workers, chunk_size : int
-        Parallelism and memory bound of the modal engine.
+        Parallelism and memory bound of the modal engine. Results do not depend on them. The default chunk of
+        64 samples keeps a chunk's (chunk, n_dof, n_dof) temporaries small (better cache reuse, far fewer fresh
+        pages mapped per chunk): measured 5-10 % faster than 256 on the 45-DOF machine tool.
     n_resamples : int
         Bootstrap resamples for the confidence intervals.
     executor : Executor, str or None
