@@ -9,8 +9,7 @@ from scipy import integrate
 from scipy.stats import chi2, kstest, norm
 
 from cappe.exceptions import DataError
-from cappe.monitor import SEVERITY_GRADES, Diagnosis, FaultHypothesis, SeverityThresholds, diagnose
-from cappe.monitor._diagnosis import severity_rank
+from cappe.monitor import SEVERITY_GRADES, Diagnosis, FaultHypothesis, SeverityThresholds, diagnose, severity_rank
 
 # a covariance with correlations, as the component factors of one FRF fit have (4 components)
 SIGMA = np.array([0.004, 0.006, 0.005, 0.008])

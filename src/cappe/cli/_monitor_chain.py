@@ -286,7 +286,7 @@ def baseline(args: argparse.Namespace) -> int:
 
 
 def _status_of(store: Any, machine: str) -> dict[str, Any]:
-    from cappe.monitor import SEVERITY_GRADES
+    from cappe.monitor import worst_severity
 
     latest = store.latest_measurement(machine)
     table = store.estimates(machine, path="fast")
@@ -300,8 +300,7 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
                                  "change": None if r.parameter not in change else float(change[r.parameter])}
                    for r in rows.itertuples()}
     active = store.alarms(machine, unacknowledged=True)
-    grades = [a.severity for a in active if a.severity in SEVERITY_GRADES]
-    worst = max(grades, key=SEVERITY_GRADES.index) if grades else None
+    worst = worst_severity([a.severity for a in active])
     return {"machine": machine, "measurements": store.counts(machine)["measurements"],
             "latest": None if latest is None else latest.to_dict(), "factors": factors,
             "baseline": store.baseline(machine) is not None,

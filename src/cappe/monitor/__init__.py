@@ -23,6 +23,8 @@ from cappe.monitor._config import (
     SeverityThresholds,
     default_components,
     default_config,
+    severity_rank,
+    worst_severity,
 )
 from cappe.monitor._dashboard import DashboardServer, make_server
 from cappe.monitor._detection import (
@@ -106,7 +108,9 @@ __all__ = [
     "read_scenario",
     "register_machine",
     "sensor_visibility",
+    "severity_rank",
     "simulate_scenario",
     "static_bearing_stiffness",
+    "worst_severity",
     "write_scenario",
 ]

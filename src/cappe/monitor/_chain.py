@@ -38,9 +38,9 @@ from cappe.exceptions import DataError
 from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, load_model
 from cappe.monitor._baseline import Baseline, learn_baseline
-from cappe.monitor._config import MonitorConfig
+from cappe.monitor._config import MonitorConfig, severity_rank
 from cappe.monitor._detection import ChartSignal, SequentialDetector
-from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose, severity_rank
+from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
 from cappe.monitor._estimation import FactorEstimate, FactorEstimator
 from cappe.monitor._features import frf_features, modal_features
 from cappe.systems.frf import FRFData
@@ -242,19 +242,34 @@ class Monitor:
         if not analyses:
             msg = f"machine '{self.config.machine}': a baseline needs healthy measurements; got none"
             raise DataError(msg)
-        band_frfs = None
-        if frfs:
-            band_frfs = [self._band(f) for f in frfs]
+        return self._learn(np.array([a.estimate.log_factor for a in analyses]),
+                           features=[a.feature_values() for a in analyses], conditions=conditions, frfs=frfs,
+                           resolution=resolution, measurement_ids=measurement_ids,
+                           sigma=float(np.median([a.estimate.sigma for a in analyses])))
+
+    def _learn(
+        self,
+        log_factors: Array,
+        *,
+        features: Sequence[Mapping[str, float]],
+        conditions: Sequence[Mapping[str, float]] | None,
+        frfs: Sequence[FRFData] | None,
+        resolution: float,
+        measurement_ids: Sequence[int],
+        sigma: float | None,
+    ) -> Baseline:
+        """:func:`learn_baseline` with what the machine adds: its component names, the mean FRF on its band and
+        channels, and the preload map."""
         return learn_baseline(
-            np.array([a.estimate.log_factor for a in analyses]),
+            log_factors,
             names=self.estimator.names,
             conditions=conditions,
-            frfs=band_frfs,
-            features=[a.feature_values() for a in analyses],
+            frfs=[self._band(f) for f in frfs] if frfs else None,
+            features=features,
             resolution=resolution,
             measurement_ids=measurement_ids,
             preload_map=self._preload_map(),
-            sigma=float(np.median([a.estimate.sigma for a in analyses])),
+            sigma=sigma,
         )
 
     def _band(self, frf: FRFData) -> FRFData:
@@ -422,8 +437,7 @@ def ingest(
         with store.transaction(machine) as tx:
             tx.add_estimates(mid, path="slow", values=dict(zip(slow.names, slow.factor.tolist(), strict=True)),
                              std=dict(zip(slow.names, slow.std.tolist(), strict=True)))
-        analysis = Analysis(analysis.estimate, analysis.frequency, analysis.damping, analysis.frac, analysis.csf,
-                            slow, analysis.notes)
+        analysis = replace(analysis, slow=slow)
     return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})))
 
 
@@ -460,17 +474,9 @@ def learn_store_baseline(
     feats = feats[feats["measurement_id"].isin(ids)]
     per_measurement = [dict(zip(g["name"], g["value"], strict=True)) for _, g in feats.groupby("measurement_id")]
     frfs = [f for f in (store.frf(i) for i in ids) if f is not None]
-    baseline = learn_baseline(
-        log_factors,
-        names=names,
-        conditions=[r.conditions for r in records],
-        frfs=[mon._band(f) for f in frfs] if len(frfs) == len(ids) else None,
-        features=per_measurement,
-        resolution=resolution,
-        measurement_ids=ids,
-        preload_map=mon._preload_map(),
-        sigma=_median_fit_sigma(records),
-    )
+    baseline = mon._learn(log_factors, features=per_measurement, conditions=[r.conditions for r in records],
+                          frfs=frfs if len(frfs) == len(ids) else None, resolution=resolution,
+                          measurement_ids=ids, sigma=_median_fit_sigma(records))
     store.set_baseline(machine, baseline.to_dict())
     with store.transaction(machine) as tx:
         tx.set_state({"baseline": baseline.created, "detector": None, "active": {}, "count": 0})

@@ -25,12 +25,31 @@ from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 
 __all__ = ["CONFIG_FORMAT", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds",
-           "default_components", "default_config"]
+           "default_components", "default_config", "severity_rank", "worst_severity"]
 
 CONFIG_FORMAT = "cappe.monitor-config/1"
 
 #: The thesis's three grades (1.1, block 6), from harmless to stop-the-machine.
 SEVERITY_GRADES = ("tolerable", "conditionally tolerable", "intolerable")
+
+def severity_rank(grade: str | None) -> int:
+    """0 for no grade, 1, 2, 3 from tolerable to intolerable; a grade cappe does not know (a store written by
+    other software) ranks as the worst, so that it is never hidden.
+
+    Examples
+    --------
+    >>> [severity_rank(g) for g in (None, "tolerable", "intolerable", "on fire")]
+    [0, 1, 3, 4]
+    """
+    if grade is None:
+        return 0
+    return SEVERITY_GRADES.index(grade) + 1 if grade in SEVERITY_GRADES else len(SEVERITY_GRADES) + 1
+
+
+def worst_severity(grades: Sequence[str]) -> str | None:
+    """The most severe of ``grades`` (None for none)."""
+    return max(grades, key=severity_rank) if grades else None
+
 
 _DIRECTION_SUFFIX = re.compile(r"_(x|y|z|rx|ry|rz|radial|axial)$")
 

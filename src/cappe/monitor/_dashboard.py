@@ -52,7 +52,7 @@ from sqlalchemy.exc import ArgumentError
 
 from cappe._logging import get_logger
 from cappe.exceptions import DataError
-from cappe.monitor._config import SEVERITY_GRADES
+from cappe.monitor._config import SEVERITY_GRADES, worst_severity
 
 if TYPE_CHECKING:
     from cappe.monitor._store import HistoryStore
@@ -130,15 +130,6 @@ def _number(value: Any) -> float | None:
 def _format(value: float | None, digits: int) -> str:
     """``value`` to ``digits`` significant digits, trailing zeros kept (``0.9000``); an en dash when missing."""
     return "\u2013" if value is None else f"{value:#.{digits}g}"
-
-
-def _severity_rank(severity: str) -> int:
-    """Position of a severity in :data:`SEVERITY_GRADES`; an unknown grade ranks as the worst."""
-    return SEVERITY_GRADES.index(severity) if severity in SEVERITY_GRADES else len(SEVERITY_GRADES)
-
-
-def _worst(severities: Sequence[str]) -> str | None:
-    return max(severities, key=_severity_rank) if severities else None
 
 
 def _sorted_frame(frame: pd.DataFrame) -> pd.DataFrame:
@@ -247,7 +238,7 @@ class _Api:
                 "model": _jsonable(config.get("model")),
                 "n_measurements": len(self.store.measurements(machine)),
                 "active_alarms": len(active),
-                "worst_severity": _worst([a.severity for a in active]),
+                "worst_severity": worst_severity([a.severity for a in active]),
             })
         return {"machines": rows}
 
@@ -307,7 +298,7 @@ class _Api:
             "components": components,
             "features": latest_features,
             "active_alarms": len(active),
-            "worst_severity": _worst([a.severity for a in active]),
+            "worst_severity": worst_severity([a.severity for a in active]),
             "severity_grades": list(SEVERITY_GRADES),
         }
 

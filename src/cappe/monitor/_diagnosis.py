@@ -22,16 +22,11 @@ from numpy.typing import ArrayLike, NDArray
 from scipy.stats import chi2 as chi2_dist
 
 from cappe.exceptions import DataError
-from cappe.monitor._config import SEVERITY_GRADES, SeverityThresholds
+from cappe.monitor._config import SeverityThresholds
 
-__all__ = ["Diagnosis", "FaultHypothesis", "diagnose", "severity_rank"]
+__all__ = ["Diagnosis", "FaultHypothesis", "diagnose"]
 
 Array = NDArray[np.float64]
-
-
-def severity_rank(grade: str | None) -> int:
-    """0 for no grade, then 1, 2, 3 from tolerable to intolerable."""
-    return 0 if grade is None else SEVERITY_GRADES.index(grade) + 1
 
 
 @dataclass(frozen=True)
