@@ -71,7 +71,7 @@ from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
-from cappe.parallel import Executor, chunk_slices
+from cappe.parallel import Executor, chunk_slices, single_threaded_blas
 
 __all__ = [
     "DAMPING_KINDS",
@@ -831,7 +831,11 @@ class AutomatedIdentification(Estimator):
              rng: np.random.Generator) -> ParameterEstimate:
         runner = Executor.coerce(self.executor, self.n_workers)
         try:
-            return self._stages(model, space, data, rng, runner)
+            # BLAS on one thread in the calling thread too: its serial stages (the refinements' least squares on
+            # Jacobians of about 10 000 x 27) ran 2-10x slower on two OpenBLAS threads than on one (measured,
+            # benchmarks/bench_pipeline.py); the parallelism is over samples, on the executor
+            with single_threaded_blas():
+                return self._stages(model, space, data, rng, runner)
         finally:
             if runner is not self.executor:  # made here (e.g. a Dask client from an address): release it
                 runner.close()
