@@ -66,7 +66,14 @@ from cappe.estimate._base import _LAST_FIT, Estimator, fit_least_squares
 from cappe.estimate._modal_updating import ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._validation import ValidationResult, _pair, find_set, summarize, validate_identification
+from cappe.estimate._validation import (
+    ValidationResult,
+    _pair,
+    _truth_receptance,
+    find_set,
+    summarize,
+    validate_identification,
+)
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
@@ -1010,7 +1017,10 @@ class AutomatedIdentification(Estimator):
                 models.append((space.full(p_perm), target))
                 perm_info.append({"assignment": {damp_names[i]: damp_names[o] for i, o in enumerate(order)}})
         # independent FRF validations: on the executor (numpy's solves release the GIL)
-        checked = runner.map(check, models, done=lambda _: val_bar.update(1))
+        try:
+            checked = runner.map(check, models, done=lambda _: val_bar.update(1))
+        finally:
+            _truth_receptance.cache_clear()  # the reference FRFs (tens of MB per position) are not kept
         held_result = None if held is None else checked.pop(0)
         ident_results = checked[: len(ident)]
         permuted = checked[len(ident):]

@@ -47,6 +47,7 @@ from cappe.exceptions import DataError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
+from cappe.parallel import chunk_slices
 
 __all__ = ["ValidationResult", "find_set", "model_receptance", "summarize", "validate_identification"]
 
@@ -176,6 +177,10 @@ def find_set(reference: ModalData, position: Mapping[str, float], model: Numeric
     raise DataError(msg)
 
 
+#: Frequency lines per block of the FRF computations: (lines, n_out, n_in) blocks stay in the CPU caches.
+_BLOCK_LINES = 24
+
+
 def model_receptance(
     model: NumericModel,
     params: ArrayLike,
@@ -197,38 +202,47 @@ def model_receptance(
     >>> bool(np.isclose(H[0, 0, 0].real, np.linalg.inv(nm.matrices()["K"])[0, 0]))
     True
     """
-    p = np.asarray(params, dtype=float)
-    labels, rows = model.sensor_matrix(p, position)
+    lines = _receptance_lines(model, np.asarray(params, dtype=float), position, freq, outputs, inputs)
+    return np.ascontiguousarray(np.moveaxis(lines, 0, -1))
+
+
+def _receptance_lines(model: NumericModel, params: Array, position: Mapping[str, float] | None, freq: ArrayLike,
+                      outputs: Sequence[str], inputs: Sequence[str]) -> CArray:
+    """:func:`model_receptance` laid out line-major, ``H[freq, out, in]`` (the layout the criteria stream)."""
+    labels, rows = model.sensor_matrix(params, position)
     index = {lab: i for i, lab in enumerate(labels)}
     missing = [c for c in (*outputs, *inputs) if c not in index]
     if missing:
         msg = f"channels {sorted(set(missing))} are not sensor channels of model '{model.structure.name}'"
         raise DataError(msg)
     s_out = rows[[index[c] for c in outputs]]
-    s_in = rows[[index[c] for c in inputs]]
-    mats = model.matrices(p, position)
+    s_in_t = np.ascontiguousarray(rows[[index[c] for c in inputs]].T).astype(complex)  # (n, n_in)
+    mats = model.matrices(params, position)
+    damping = mats["C"] + mats["G"]
     omega = 2 * np.pi * np.asarray(freq, dtype=float)
-    # the dynamic stiffness, real and imaginary parts written in place (no (n_f, n, n) complex temporaries)
-    dyn = np.empty((omega.size, *mats["K"].shape), dtype=complex)
-    np.multiply(-(omega**2)[:, None, None], mats["M"], out=dyn.real)
-    dyn.real += mats["K"]
-    np.multiply(omega[:, None, None], mats["C"] + mats["G"], out=dyn.imag)
-    dyn.imag += mats["H"]
-    n, n_in = s_in.shape[1], s_in.shape[0]
-    x = np.linalg.solve(dyn, np.broadcast_to(s_in.T.astype(complex), (omega.size, n, n_in)))  # (n_f, n, n_in)
-    # one real GEMM over all lines, on the interleaved real and imaginary parts of x laid out (n, n_in, n_f), which
-    # gives H[out, in, freq] in place (a broadcast real @ complex matmul takes numpy's slow non-BLAS loop)
-    x_t = np.ascontiguousarray(np.transpose(x, (1, 2, 0))).reshape(n, -1).view(np.float64)  # (n, 2 n_in n_f)
-    h = (s_out @ x_t).view(complex)  # (n_out, n_in * n_f)
-    return h.reshape(s_out.shape[0], n_in, omega.size)
+    out = np.empty((omega.size, s_out.shape[0], s_in_t.shape[1]), dtype=complex)
+    for s in chunk_slices(omega.size, _BLOCK_LINES):
+        w = omega[s]
+        # the dynamic stiffness of the block's lines, real and imaginary parts written in place
+        dyn = np.empty((w.size, *mats["K"].shape), dtype=complex)
+        np.multiply(-(w**2)[:, None, None], mats["M"], out=dyn.real)
+        dyn.real += mats["K"]
+        np.multiply(w[:, None, None], damping, out=dyn.imag)
+        dyn.imag += mats["H"]
+        x = np.linalg.solve(dyn, np.broadcast_to(s_in_t, (w.size, *s_in_t.shape)))  # (lines, n, n_in)
+        # S_out x as real products on the interleaved real and imaginary parts (a real @ complex matmul takes
+        # numpy's slow non-BLAS loop), written straight into the block of the result
+        np.matmul(s_out, x.view(np.float64), out=out[s].view(np.float64))
+    return out
 
 
-@functools.lru_cache(maxsize=2)
+@functools.lru_cache(maxsize=4)
 def _truth_receptance(model: NumericModel, truth: bytes, position: tuple[tuple[str, float], ...], grid: bytes,
                       outputs: tuple[str, ...], inputs: tuple[str, ...]) -> CArray:
-    """The reference FRFs of a simulated reference, computed once for the validations that share them
-    (the held-out position and every permuted-damping model compare against the same truth)."""
-    out = model_receptance(model, np.frombuffer(truth), dict(position), np.frombuffer(grid), outputs, inputs)
+    """The reference FRFs of a simulated reference (line-major), computed once for the validations that share
+    them (the held-out position and every permuted-damping model compare against the same truth); the
+    automated identification clears this cache when its validations are done."""
+    out = _receptance_lines(model, np.frombuffer(truth), dict(position), np.frombuffer(grid), outputs, inputs)
     out.setflags(write=False)
     return out
 
@@ -236,39 +250,56 @@ def _truth_receptance(model: NumericModel, truth: bytes, position: tuple[tuple[s
 def _frf_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
     """FRAC and line-averaged CSF of every FRF pair ``[out, in]`` (NaN where the reference is negligible).
 
-    The formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf` (one output per FRF), written
-    with row-wise inner products so that 81 x 81 FRFs of 600 lines need no temporaries of their size.
+    The formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf` (one output per FRF); the arrays
+    are (..., n_freq), frequency last (see :func:`_line_criteria` for the streamed form).
     """
-    power_ref = np.vecdot(h_ref, h_ref).real  # vecdot conjugates its first argument, without a copy
-    keep = power_ref > NEGLIGIBLE_POWER * power_ref.max()
-    frac_v = np.full(power_ref.shape, np.nan)
-    csf_v = np.full(power_ref.shape, np.nan)
-    if np.any(keep):
-        a, x = h_mod[keep], h_ref[keep]  # (n_keep, n_freq)
-        power_a = np.vecdot(a, a).real
-        cross = np.abs(np.vecdot(x, a)) ** 2
-        frac_v[keep] = cross / (power_a * power_ref[keep])
-        mag_a, mag_x = np.abs(a), np.abs(x)
-        den = np.square(mag_a)
-        den += np.square(mag_x)
-        mag_a *= mag_x
-        mag_a *= 2.0
+    return _line_criteria(np.moveaxis(h_mod, -1, 0), np.moveaxis(h_ref, -1, 0))
+
+
+def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
+    """:func:`_frf_criteria` of line-major arrays ``(n_freq, ...)``, accumulated over blocks of lines.
+
+    Per FRF it sums ``|H_a|^2``, ``|H_x|^2``, ``conj(H_x) H_a`` and the line's CSF
+    ``2 |H_a| |H_x| / (|H_a|^2 + |H_x|^2)`` (1 where both are zero) over the lines; a block of lines is small
+    enough for the CPU caches, so 81 x 81 FRFs of 600 lines need no temporaries of their size.
+    """
+    shape = h_ref.shape[1:]
+    power_a, power_x, csf_sum = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    cross = np.zeros(shape, dtype=complex)
+    for s in chunk_slices(h_ref.shape[0], _BLOCK_LINES):
+        a, x = h_mod[s], h_ref[s]
+        pa = np.square(a.real)
+        pa += np.square(a.imag)
+        px = np.square(x.real)
+        px += np.square(x.imag)
+        power_a += pa.sum(axis=0)
+        power_x += px.sum(axis=0)
+        cross += np.einsum("f...,f...->...", x.conj(), a)
+        den = pa + px
+        pa *= px
+        np.sqrt(pa, out=pa)
+        pa *= 2.0
         line = np.ones(den.shape)  # both zero at a line: equal there
-        np.divide(mag_a, den, out=line, where=den > 0)
-        csf_v[keep] = np.mean(line, axis=-1)
+        np.divide(pa, den, out=line, where=den > 0)
+        csf_sum += line.sum(axis=0)
+    keep = power_x > NEGLIGIBLE_POWER * power_x.max()
+    frac_v = np.full(shape, np.nan)
+    csf_v = np.full(shape, np.nan)
+    frac_v[keep] = np.abs(cross[keep]) ** 2 / (power_a[keep] * power_x[keep])
+    csf_v[keep] = csf_sum[keep] / h_ref.shape[0]
     return frac_v, csf_v
 
 
 def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, out_idx: Sequence[int],
                in_idx: Sequence[int]) -> CArray:
-    """Modal sum ``sum_r psi_jr psi_kr / (w_r^2 - w^2 + 2 i zeta_r w_r w)``: (n_out, n_in, n_freq)."""
+    """Modal sum ``sum_r psi_jr psi_kr / (w_r^2 - w^2 + 2 i zeta_r w_r w)``, line-major: (n_freq, n_out, n_in)."""
     psi = np.asarray(shapes)
     wr = 2 * np.pi * freq_modes
     w = 2 * np.pi * freq
     den = wr[None, :] ** 2 - w[:, None] ** 2 + 2j * zeta[None, :] * wr[None, :] * w[:, None]  # (n_f, m)
     a = psi[list(out_idx)]  # (n_out, m)
     b = psi[list(in_idx)]
-    return np.asarray(np.einsum("jr,kr,fr->jkf", a, b, 1.0 / den), dtype=complex)
+    return np.asarray(np.einsum("jr,kr,fr->fjk", a, b, 1.0 / den), dtype=complex)
 
 
 def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet) -> tuple[NDArray[np.intp], Array]:
@@ -377,13 +408,13 @@ def validate_identification(
         t = nm.vector(truth if isinstance(truth, Mapping) else np.asarray(truth, dtype=float))
         h_ref = _truth_receptance(nm, t.tobytes(), tuple(pos.items()), f_grid.tobytes(), tuple(sensors),
                                   tuple(channels_in))
-        h_mod = model_receptance(nm, p, pos, f_grid, sensors, channels_in)
+        h_mod = _receptance_lines(nm, p, pos, f_grid, sensors, channels_in)
         source = "truth"
     else:
         h_ref = _synthesis(data_set.shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)), in_idx)
         h_mod = _synthesis(shapes[:, model_of], f_model, zeta_model, f_grid, range(len(sensors)), in_idx)
         source = "modal synthesis"
-    frac_v, csf_v = _frf_criteria(h_mod, h_ref)
+    frac_v, csf_v = _line_criteria(h_mod, h_ref)
     if overlay is not None:
         if overlay[0] not in sensors or overlay[1] not in channels_in:
             msg = f"overlay {overlay} must name a reference channel and an FRF input channel {channels_in}"
@@ -391,10 +422,10 @@ def validate_identification(
         o_best, i_best = sensors.index(overlay[0]), channels_in.index(overlay[1])
     else:
         drive = [(sensors.index(c), j) for j, c in enumerate(channels_in)]
-        peak = [float(np.max(np.abs(h_ref[o, i]))) for o, i in drive]
+        peak = [float(np.max(np.abs(h_ref[:, o, i]))) for o, i in drive]
         o_best, i_best = drive[int(np.argmax(peak))]
-    kept = {"output": sensors[o_best], "input": channels_in[i_best], "reference": h_ref[o_best, i_best],
-            "model": h_mod[o_best, i_best]}
+    kept = {"output": sensors[o_best], "input": channels_in[i_best], "reference": h_ref[:, o_best, i_best].copy(),
+            "model": h_mod[:, o_best, i_best].copy()}
     return ValidationResult(
         position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
         model_frequency=f_model, macxp=values, nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,

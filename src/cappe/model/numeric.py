@@ -155,6 +155,9 @@ class NumericModel:
         self.output_quantities = tuple(o.quantity for o in self.structure.outputs)
         self._pattern_cache: dict[tuple[float, ...], dict[str, Array]] = {}
         self._source_row_cache: dict[tuple[float, ...], Array] = {}
+        self._sensor_matrix_cache: dict[tuple[tuple[str, ...], tuple[float, ...], bytes], tuple[tuple[str, ...],
+                                                                                         Array]] = {}
+        self._sensor_moves: dict[str, bool] = {}
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
@@ -480,12 +483,26 @@ class NumericModel:
         names = list(sensors) if sensors is not None else [s.name for s in self.structure.sensors]
         p = self.vector(params)
         pos = self.position_vector(position)
-        subs = dict(zip(self._param_symbols + self._axis_symbols, list(p) + list(pos), strict=True))
-        labels: list[str] = []
-        rows = np.zeros((3 * len(names), self.n_dof))
-        for k, name in enumerate(names):
-            for a, row in enumerate(self.symbolic.sensor_rows(name)):
-                labels.append(f"{name}:{'xyz'[a]}")
-                for j, v in row.items():
-                    rows[3 * k + a, j] = float(cast(sp.Expr, v).xreplace(subs))
-        return labels, rows
+        symbols = self._param_symbols + self._axis_symbols
+        for name in names:
+            if name not in self._sensor_moves:
+                self._sensor_moves[name] = any(set(self._param_symbols) & cast(sp.Expr, v).free_symbols
+                                               for row in self.symbolic.sensor_rows(name) for v in row.values())
+        # the rows are exact substitutions, so a repeat of the same sensors, position (and parameters, where a
+        # sensor point moves with them) is served from a small cache
+        key = (tuple(names), pos, p.tobytes() if any(self._sensor_moves[name] for name in names) else b"")
+        cached = self._sensor_matrix_cache.get(key)
+        if cached is None:
+            subs = dict(zip(symbols, list(p) + list(pos), strict=True))
+            labels: list[str] = []
+            rows = np.zeros((3 * len(names), self.n_dof))
+            for k, name in enumerate(names):
+                for a, row in enumerate(self.symbolic.sensor_rows(name)):
+                    labels.append(f"{name}:{'xyz'[a]}")
+                    for j, v in row.items():
+                        rows[3 * k + a, j] = float(cast(sp.Expr, v).xreplace(subs))
+            if len(self._sensor_matrix_cache) >= 64:
+                self._sensor_matrix_cache.clear()
+            cached = (tuple(labels), rows)
+            self._sensor_matrix_cache[key] = cached
+        return list(cached[0]), cached[1].copy()

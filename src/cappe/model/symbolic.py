@@ -63,6 +63,7 @@ class SymbolicModel:
         self.dofs = structure.dofs
         self.n_dof = structure.n_dof
         self._offset: dict[str, int] = {}
+        self._sensor_rows: dict[str, list[SparseRow]] = {}
         i = 0
         for body in structure.bodies:
             self._offset[body.name] = i
@@ -215,9 +216,13 @@ class SymbolicModel:
         return out.quantity, self.direction_row(out.body, out.point, out.direction, rotation=out.rotation)
 
     def sensor_rows(self, name: str) -> list[SparseRow]:
-        """Rows for the x, y, z displacement of a sensor node."""
-        s = self.structure.sensor(name)
-        return self.point_rows(s.body, s.point)
+        """Rows for the x, y, z displacement of a sensor node (derived once per sensor; a fresh list each call)."""
+        rows = self._sensor_rows.get(name)
+        if rows is None:
+            s = self.structure.sensor(name)
+            rows = self.point_rows(s.body, s.point)
+            self._sensor_rows[name] = rows
+        return [dict(row) for row in rows]
 
     def input_matrix(self, inputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
         names = list(inputs) if inputs is not None else [i.name for i in self.structure.inputs]
