@@ -80,7 +80,10 @@ def _jacobian(expressions: Sequence[sp.Expr], symbols: Sequence[sp.Symbol]) -> t
     entries: list[tuple[int, int]] = []
     derivatives: list[sp.Expr] = []
     for j, expr in enumerate(expressions):
+        present = sp.sympify(expr).free_symbols  # differentiate only by the symbols in expr (most are absent)
         for i, sym in enumerate(symbols):
+            if sym not in present:
+                continue
             d = sp.diff(expr, sym)
             if d != 0:
                 entries.append((j, i))
@@ -337,6 +340,43 @@ class NumericModel:
         graph = sps.coo_array((np.ones(nz.size), (nz // n, nz % n)), shape=(n, n))
         count, labels = connected_components(graph, directed=False)
         return [np.flatnonzero(labels == k) for k in range(count)]
+
+    def affine_terms(
+        self, names: Sequence[str], params: ParamsLike = None, position: Mapping[str, float] | None = None
+    ) -> dict[str, tuple[Array, Array]]:
+        """The affine form ``X = sum_j f_j P_j`` of each matrix in ``names``: coefficients (B, n_terms) and
+        patterns (n_terms, n, n, shared and read-only) at one axis position.
+
+        Only for matrices without parameter-dependent patterns; the modal engine reduces a mass matrix shared by
+        a batch with it.
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+        >>> coef, patterns = nm.affine_terms(["K"], nm.nominal[None, :])["K"]
+        >>> bool(np.allclose(np.einsum("bt,tij->bij", coef, patterns)[0], nm.matrices()["K"]))
+        True
+        """
+        for name in names:
+            if name not in self._slices:
+                msg = f"matrix must be one of {MATRIX_NAMES}; got {name!r}"
+                raise ModelError(msg)
+            if name in self._residual_funcs:
+                msg = (f"matrix {name} of model '{self.structure.name}' has parameter-dependent patterns: it has "
+                       "no affine form")
+                raise ModelError(msg)
+        p = self.vector(params)
+        pb = p if p.ndim == 2 else p[None, :]
+        pos = self.position_vector(position)
+        n = self.n_dof
+        coef = self._coefficient_values(pb, pos)
+        out: dict[str, tuple[Array, Array]] = {}
+        for name in names:
+            patterns = self._patterns(pos)[name].reshape(-1, n, n)
+            patterns.setflags(write=False)
+            out[name] = (coef[:, self._slices[name]], patterns)
+        return out
 
     def _coefficient_values(self, pb: Array, pos: tuple[float, ...]) -> Array:
         args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]

@@ -382,7 +382,7 @@ class StructureBuilder:
                 msg = f"direction must have non-zero length; got {list(value)!r} ({where})"
                 raise ModelError(msg)
             norm = sp.sqrt(norm2)
-            vec = tuple(sp.simplify(v / norm) for v in vec)
+            vec = tuple(_simplified(v / norm) for v in vec)
         return vec  # type: ignore[return-value]
 
     def _evaluation_points(self) -> list[dict[sp.Symbol, sp.Float]]:
@@ -393,10 +393,16 @@ class StructureBuilder:
 
     def _nominal_value(self, expr: sp.Expr) -> float | None:
         """Smallest value of ``expr`` over :meth:`_evaluation_points`; None if it is not a real number."""
+        expr = sp.sympify(expr)
+        if not expr.free_symbols:  # a number: the same at every point
+            try:
+                return float(expr.evalf())
+            except (TypeError, ValueError):
+                return None
         values = []
         for subs in self._evaluation_points():
             try:
-                values.append(float(sp.sympify(expr).xreplace(subs).evalf()))
+                values.append(float(expr.xreplace(subs).evalf()))
             except (TypeError, ValueError):
                 return None
         return min(values) if values else None
@@ -713,9 +719,9 @@ class StructureBuilder:
         if norm is not None and norm < 1e-9:
             msg = f"element {name!r} axes x and y must not be parallel ({where})"
             raise ModelError(msg)
-        ey = sp.simplify(ey / sp.sqrt((ey.T * ey)[0, 0]))
+        ey = (ey / sp.sqrt((ey.T * ey)[0, 0])).applyfunc(_simplified)
         ez = ex.cross(ey)
-        return sp.ImmutableMatrix(sp.Matrix.hstack(ex, ey, sp.simplify(ez)))
+        return sp.ImmutableMatrix(sp.Matrix.hstack(ex, ey, ez.applyfunc(_simplified)))
 
     def _directional(self, name: str, label: str, table: Mapping[str, object], where: str) -> Mapping[str, sp.Expr]:
         if not isinstance(table, Mapping):
@@ -851,6 +857,12 @@ class StructureBuilder:
         index = {g: MappingProxyType({item.name: i for i, item in enumerate(getattr(structure, g))}) for g in groups}
         object.__setattr__(structure, "_index", MappingProxyType(index))
         return structure
+
+
+def _simplified(expr: sp.Expr) -> sp.Expr:
+    """``sympy.simplify(expr)``, skipped for a rational number (already in its simplest form; the axis-aligned
+    directions of most models, where simplify's tries took most of the model loading time)."""
+    return expr if expr.is_Rational else sp.simplify(expr)
 
 
 def _finite(value: object, what: str, where: str) -> float:
