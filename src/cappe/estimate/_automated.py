@@ -865,17 +865,17 @@ class AutomatedIdentification(Estimator):
         ident_ref = ModalData(data.sensors, tuple(data.sets[k] for k in ident), data.source)
         seeds = rng.integers(1, 2**31, size=4)
         w_f, w_z, w_s = (float(v) for v in self.weights)
-        # the known parameters' values: the GSA evaluates the model at nm.nominal, so hand it a view whose
-        # nominal vector holds them
-        gsa_model = model
+        # the known parameters' values: the GSA evaluates the model at its nominal vector, so hand it (and the
+        # subproblems' engine, whose shared-mass reduction is that of the nominal M) a view whose nominal holds them
+        base_model = model
         if not np.array_equal(space.base, model.nominal):
-            gsa_model = copy.copy(model)
-            gsa_model.nominal = space.base.copy()
+            base_model = copy.copy(model)
+            base_model.nominal = space.base.copy()
         bounds_arr = np.column_stack([space.lower, space.upper])
 
         # 1. GSA ------------------------------------------------------------------------------------------------
         t = time.perf_counter()
-        gsa = model_sobol(gsa_model, ident_ref, parameters=list(space.names), bounds=bounds_arr, n=int(self.n_gsa),
+        gsa = model_sobol(base_model, ident_ref, parameters=list(space.names), bounds=bounds_arr, n=int(self.n_gsa),
                           rng=int(seeds[0]), criteria=tuple(self.criteria), n_workers=self.n_workers,
                           executor=runner,
                           progress=self.progress)
@@ -893,7 +893,7 @@ class AutomatedIdentification(Estimator):
 
         # 2. stiffness subproblems --------------------------------------------------------------------------------
         t = time.perf_counter()
-        engine = ModalEngine(model, sensors=list(data.sensors))
+        engine = ModalEngine(base_model, sensors=list(data.sensors))  # known masses at their nominal: shared M
         jobs: list[tuple[int, int, tuple[str, ...]]] = []
         for j in range(len(ident)):
             position = structure.resolve_position(ident_ref.sets[j].position)
