@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import platform
 import subprocess
 import sys
 import threading
@@ -164,3 +165,14 @@ def test_dask_cluster_gives_the_serial_results(bench, reference, serial_run, das
         np.testing.assert_array_equal(remote.poles, local.poles)
         # the whole pipeline, given as an address (the estimator opens and closes its own client)
     _same(_identify(bench, reference, dask_cluster), serial_run)
+
+
+@pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
+def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
+    code = "from cappe.parallel import retain_freed_memory as r; print(r(), r())"
+    env = {k: v for k, v in os.environ.items() if not k.startswith("MALLOC_")}
+    tuned = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True)
+    assert tuned.stdout.split() == ["True", "True"]
+    left = subprocess.run([sys.executable, "-c", code], env={**env, "MALLOC_TRIM_THRESHOLD_": "1000000"},
+                          capture_output=True, text=True, check=True)
+    assert left.stdout.split() == ["False", "False"]

@@ -21,8 +21,8 @@ from cappe.exceptions import ModelError
 from cappe.io.modal import ModalData
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import DampingSources, NumericModel, ParamsLike
-from cappe.model.symbolic import MATRIX_NAMES
 from cappe.model.structure import Structure
+from cappe.model.symbolic import MATRIX_NAMES
 from cappe.parallel import Executor, map_chunks
 
 if TYPE_CHECKING:

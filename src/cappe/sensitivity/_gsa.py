@@ -242,5 +242,5 @@ def model_sobol(
         return np.concatenate(parts, axis=1)
 
     result = sobol_indices(func=func, bounds=bounds, names=names, n=n, rng=rng, n_resamples=n_resamples,
-                           output_names=output_names, progress=progress, chunk_size=max(chunk_size * 8, 1024))
+                           output_names=output_names, progress=progress, chunk_size=max(chunk_size * 128, 8192))
     return ModelSobolResult(result, tuple(out_criteria), tuple(out_modes), tuple(out_positions), np.array(ref_freq))
