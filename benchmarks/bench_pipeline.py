@@ -102,9 +102,11 @@ def _bare_seconds(kind: str, n: int, dtype: str, count: int, threads: int = 1) -
     with single_threaded_blas(), ThreadPoolExecutor(threads) as pool:
         func(a[:2])
         list(pool.map(func, [a[:2]] * threads))  # threads started
-        t0 = time.perf_counter()
-        list(pool.map(func, [a] * threads))
-        seconds = time.perf_counter() - t0
+        seconds = float("inf")
+        for _ in range(5):  # the best of five: the machine's load varies (the bound is the least time possible)
+            t0 = time.perf_counter()
+            list(pool.map(func, [a] * threads))
+            seconds = min(seconds, time.perf_counter() - t0)
     return seconds * count / (sample * threads)
 
 

@@ -50,6 +50,7 @@ The pipeline (paper Fig. 1), for reference modes at several axis positions, one 
 from __future__ import annotations
 
 import copy
+import threading
 import time
 import warnings
 from collections.abc import Callable, Mapping, Sequence
@@ -982,7 +983,7 @@ class AutomatedIdentification(Estimator):
         # 4. joint refinement of everything ----------------------------------------------------------------------
         t = time.perf_counter()
         if self.exact:
-            final, joint = self._refine_exact(model, space, ident_ref, current, (w_f, w_z, w_s))
+            final, joint = self._refine_exact(model, space, ident_ref, current, (w_f, w_z, w_s), runner)
         else:
             final, joint = self._refine(model, space, ident_ref, current, list(space.names), (w_f, w_z, w_s),
                                         caught, keep=True)
@@ -1131,11 +1132,12 @@ class AutomatedIdentification(Estimator):
         reference: ModalData,
         current: Array,
         weights: tuple[float, float, float],
+        runner: Executor,
     ) -> tuple[Array, dict[str, Any]]:
-        """Joint refinement of all unknowns on the model's exact complex modes (finite-difference Jacobian)."""
-        problem = ExactModalProblem(model, space, reference, weights, self.noise)
+        """Joint refinement of all unknowns on the model's exact complex modes (analytic Jacobian)."""
+        problem = ExactModalProblem(model, space, reference, weights, self.noise, executor=runner)
         r0 = problem.residuals(current)
-        diagnostics = {"modes": "exact", "jacobian": "forward differences, batched"}
+        diagnostics = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)"}
         start = np.clip(current, space.lower, space.upper)
         est = fit_least_squares(self.method, space, problem.residuals, problem.jacobian,
                                 starts=start[None, :], diagnostics=diagnostics)
@@ -1164,8 +1166,8 @@ class ExactModalProblem:
     ``noise = (s_f, s_z, s_s)`` (the relative noise of frequencies and damping ratios, and of shape components
     relative to each mode's largest, as ``cappe simulate`` adds it) the residuals are divided by their noise
     standard deviations instead: ``s_f``, ``s_z`` and ``s_s max|x_r| / sqrt(2)``. The Jacobian
-    is by forward differences (relative step 1e-6), all unknowns perturbed in one batched evaluation per set,
-    with the pairing of the unperturbed point.
+    is analytic (first-order perturbation of each set's state-matrix eigen-decomposition, see :meth:`jacobian`),
+    with the pairing of the point. The sets are evaluated side by side on a thread ``executor``.
 
     Examples
     --------
@@ -1179,7 +1181,11 @@ class ExactModalProblem:
     """
 
     def __init__(self, model: NumericModel, space: ParameterSpace, reference: ModalData,
-                 weights: tuple[float, float, float], noise: Sequence[float] | None = None) -> None:
+                 weights: tuple[float, float, float], noise: Sequence[float] | None = None,
+                 executor: Executor | None = None) -> None:
+        # the sets (positions) are independent: with a thread executor they are evaluated side by side (LAPACK
+        # releases the GIL); elsewhere the problem's closures would be shipped for every evaluation, so serially
+        self._runner = executor if executor is not None and executor.kind == "threads" else Executor("serial")
         self.model = model
         self.space = space
         self.reference = reference
@@ -1199,11 +1205,13 @@ class ExactModalProblem:
                 div = (s_f, s_z, s_s * np.max(np.abs(x), axis=0) / np.sqrt(2))
             self.divisors.append(div)
         self.evaluations = 0
+        self._count_lock = threading.Lock()
         self._cache: dict[bytes, tuple[Array, list[NDArray[np.intp]]]] = {}
 
     def _modes(self, params: Array, k: int) -> tuple[CArray, CArray]:
         batch = self.engine.evaluate(params, self.positions[k], exact=True)
-        self.evaluations += params.shape[0]
+        with self._count_lock:
+            self.evaluations += params.shape[0]
         assert batch.poles is not None  # exact=True
         assert batch.complex_shapes is not None
         return batch.poles, batch.complex_shapes
@@ -1237,13 +1245,14 @@ class ExactModalProblem:
         if hit is not None:
             return hit
         full = self.space.full(p)[None, :]
-        res, pairs = [], []
-        for k, data_set in enumerate(self.reference.sets):
+
+        def one_set(k: int) -> tuple[Array, NDArray[np.intp]]:
             poles, shapes = self._modes(full, k)
-            index, _ = _pair(shapes[0], poles[0], data_set)
-            pairs.append(index)
-            res.append(self._residual(poles, shapes, k, index)[0])
-        out = (np.concatenate(res), pairs)
+            index, _ = _pair(shapes[0], poles[0], self.reference.sets[k])
+            return self._residual(poles, shapes, k, index)[0], index
+
+        parts = self._runner.map(one_set, range(len(self.reference.sets)))
+        out = (np.concatenate([r for r, _ in parts]), [index for _, index in parts])
         self._cache = {key: out}
         return out
 
@@ -1263,11 +1272,12 @@ class ExactModalProblem:
         _, pairs = self._evaluate(p)
         full = self.space.full(p[None, :])[0]
         columns = [self.model.parameter_names.index(n) for n in self.space.names]
-        blocks = []
-        for k, data_set in enumerate(self.reference.sets):
+
+        def one_set(k: int) -> Array:
             poles, _ = self._modes(full[None, :], k)
-            blocks.append(self._set_jacobian(full, k, poles[0][pairs[k]], columns, data_set))
-        return np.concatenate(blocks, axis=0)
+            return self._set_jacobian(full, k, poles[0][pairs[k]], columns, self.reference.sets[k])
+
+        return np.concatenate(self._runner.map(one_set, range(len(self.reference.sets))), axis=0)
 
     def _set_jacobian(self, full: Array, k: int, paired: CArray, columns: list[int],
                       data_set: ModalDataSet) -> Array:
