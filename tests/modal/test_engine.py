@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 import pytest
 
@@ -228,3 +230,19 @@ def test_block_and_diagonal_mass_reductions_match_the_reference(com):
         ref = model.system(p).modes("first-order")
         np.testing.assert_allclose(batch.frequency[k], ref.frequency, rtol=1e-9)  # round-off of n = 54 solves
         np.testing.assert_allclose(batch.damping[k], ref.damping, rtol=1e-7)
+
+
+def test_mass_errors_name_the_samples_beside_nominal_ones(slide):
+    # samples 0, 2 and 3 keep the nominal masses (the shared reduction); 1 and 4 have their own, 4 a negative one
+    model = NumericModel(slide)
+    params = np.tile(model.nominal, (5, 1))
+    ms = model.parameter_names.index("ms")
+    params[1, ms] *= 1.1
+    params[4, ms] = -1.0
+    with pytest.raises(ModelError, match=r"mass matrix is not positive definite for samples \[4\] \(1 in all\)"):
+        ModalEngine(model, n_workers=1).evaluate(params)
+    bad = copy.copy(model)
+    bad.nominal = model.nominal.copy()
+    bad.nominal[ms] = -1.0
+    with pytest.raises(ModelError, match=r"nominal mass matrix of model 'slide' at position .* not positive definite"):
+        ModalEngine(bad, n_workers=1).evaluate(np.tile(bad.nominal, (3, 1)))

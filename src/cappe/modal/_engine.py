@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeVar
 
 import numpy as np
+import scipy.sparse as sps
 from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
@@ -397,12 +398,16 @@ class ModalEngine:
             return mats, _Reductions(shared, nominal, None), reduced
         rest = np.flatnonzero(~shared)
         own = model.matrices(pb[rest], position, names=("M", "K"))
-        other = _MassReduction(own["M"], groups, offset + int(rest[0]))
+        try:
+            other = _MassReduction(own["M"], groups, 0)
+        except ModelError:  # name the samples as numbered in the whole batch: factor the chunk's M to raise that
+            _MassReduction(model.matrices(pb, position, names=("M",))["M"], groups, offset)
+            raise
         reduced[rest] = other.reduce(own["K"])
         return mats, _Reductions(shared, nominal, other), reduced
 
-    def _nominal_reduction(self, position: Mapping[str, float] | None) -> _NominalReduction | None:
-        """The reduction of the nominal mass matrix at ``position`` (made once; None if M is not affine)."""
+    def _nominal_reduction(self, position: Mapping[str, float] | None) -> _NominalReduction:
+        """The reduction of the nominal mass matrix at ``position`` (made once per position; affine models only)."""
         pos = self.model.position_vector(position)
         if pos not in self._nominal_cache:
             self._nominal_cache[pos] = _NominalReduction(self.model, position, self._mass_groups(position))
@@ -566,11 +571,15 @@ class _NominalReduction:
 
     def _factored(self) -> tuple[Array, NDArray[np.intp], Any, Array]:
         if self._factor is None:
-            import scipy.sparse as sps
-
             model = self.model
             mass = model.matrices(model.nominal[None, :], self.position, names=("M",))["M"]
-            linv = _inverse_cholesky(mass, self.groups, 0)[0]
+            try:
+                linv = _inverse_cholesky(mass, self.groups, 0)[0]
+            except ModelError as exc:
+                msg = (f"the nominal mass matrix of model '{model.structure.name}' at position "
+                       f"{dict(self.position or {})} is not positive definite (non-physical masses or inertias); "
+                       "samples with those masses have no modes")
+                raise ModelError(msg) from exc
             linv_t = np.ascontiguousarray(linv.T)
             patterns = model.affine_terms(("K",), model.nominal, self.position)["K"][1]
             flat = (linv @ patterns @ linv_t).reshape(patterns.shape[0], -1)
@@ -599,30 +608,21 @@ class _Reductions:
     def __init__(self, shared: NDArray[np.bool_], nominal: _NominalReduction, other: _MassReduction | None) -> None:
         self.shared, self.nominal, self.other = shared, nominal, other
 
-    def _combine(self, vectors: Array, nominal: Callable[[Array], Array], other: Callable[[Array], Array]) -> Array:
+    def shapes(self, vectors: Array) -> Array:
         if self.other is None:
-            return nominal(vectors)
+            return self.nominal.shapes(vectors)
         out = np.empty(vectors.shape)
-        out[self.shared] = nominal(vectors[self.shared])
-        out[~self.shared] = other(vectors[~self.shared])
+        out[self.shared] = self.nominal.shapes(vectors[self.shared])
+        out[~self.shared] = self.other.shapes(vectors[~self.shared])
         return out
 
-    def shapes(self, vectors: Array) -> Array:
-        return self._combine(vectors, self.nominal.shapes, lambda v: self._other.shapes(v))
-
     def inverse_mass(self) -> Array:
-        b = self.shared.size
         n = self.nominal.model.n_dof
-        out = np.empty((b, n, n))
+        out = np.empty((self.shared.size, n, n))
         out[self.shared] = self.nominal.inverse_mass()
         if self.other is not None:
             out[~self.shared] = self.other.inverse_mass()
         return out
-
-    @property
-    def _other(self) -> _MassReduction:
-        assert self.other is not None
-        return self.other
 
 
 def _inverse_cholesky(mass: Array, groups: list[NDArray[np.intp]], offset: int) -> Array:
