@@ -116,7 +116,13 @@ def main() -> None:
     row = json.loads(out.stdout.strip().splitlines()[-1])
     cores = len(os.sched_getaffinity(0))
     serial = sum(_bare_seconds(e["kind"], e["n"], e["dtype"], e["count"]) for e in row["eigen_solves"])
-    bound = sum(_bare_seconds(e["kind"], e["n"], e["dtype"], e["count"], cores) for e in row["eigen_solves"])
+    # the cores' joint throughput varies on a shared machine: the best of three attempts a second apart
+    attempts = []
+    for _ in range(3):
+        attempts.append(sum(_bare_seconds(e["kind"], e["n"], e["dtype"], e["count"], cores)
+                            for e in row["eigen_solves"]))
+        time.sleep(1.0)
+    bound = min(attempts)
     row.update({"cores": cores, "eigen_serial_s": serial, "bound_s": bound, "ratio_to_bound": row["wall_s"] / bound,
                 "ideal_ratio": row["wall_s"] / (serial / cores), "settings": SETTINGS})
     stages = ", ".join(f"{k} {v:.1f}" for k, v in row["stages_s"].items())
