@@ -308,17 +308,28 @@ def _macxp_core(
     # 2 sqrt(s_a s_x) / |conj(lam_a) + lam_x| and 2 sqrt(s_a s_x) / |lam_a + lam_x|: both <= 1 because
     # |Re(...)| = s_a + s_x >= 2 sqrt(s_a s_x); a zero distance only occurs for coinciding undamped poles,
     # whose limit (equal damping) is 1. In real arithmetic: Re(...) = -(s_a + s_x), Im = Im lam_x -+ Im lam_a.
+    # written in place on three arrays of the result's size (the MACXP core is the GSA's largest step after eigh)
     decay2 = np.square(s_a + s_x)
-    dist_h = np.sqrt(decay2 + np.square(lx.imag - la.imag))
-    dist_t = np.sqrt(decay2 + np.square(lx.imag + la.imag))
-    shape = np.broadcast_shapes(dist_h.shape, abs_h.shape, abs_t.shape, np.shape(den_a), np.shape(den_x))
-    root = np.broadcast_to(2.0 * root_a * root_x, shape)
-    weight_h = np.ones(shape)
-    weight_t = np.ones(shape)
-    np.divide(root, dist_h, out=weight_h, where=dist_h > 0)
-    np.divide(root, dist_t, out=weight_t, where=dist_t > 0)
-    np.minimum(weight_h, 1.0, out=weight_h)
-    np.minimum(weight_t, 1.0, out=weight_t)
+    shape = np.broadcast_shapes(decay2.shape, np.shape(lx), np.shape(la), abs_h.shape, abs_t.shape)
+    weight_h = np.empty(shape)
+    np.subtract(lx.imag, la.imag, out=weight_h)
+    np.square(weight_h, out=weight_h)
+    weight_h += decay2
+    np.sqrt(weight_h, out=weight_h)  # the distance to conj(lam_a), then the weight in place
+    weight_t = np.empty(shape)
+    np.add(lx.imag, la.imag, out=weight_t)
+    np.square(weight_t, out=weight_t)
+    weight_t += decay2
+    np.sqrt(weight_t, out=weight_t)
+    root = np.empty(shape)
+    np.multiply(root_a, root_x, out=root)
+    root *= 2.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(root, weight_h, out=weight_h)
+        np.divide(root, weight_t, out=weight_t)
+    # fmin drops the NaN of 0 / 0 (coinciding undamped poles: weight 1) and caps x / 0 = inf at 1
+    np.fmin(weight_h, 1.0, out=weight_h)
+    np.fmin(weight_t, 1.0, out=weight_t)
     if abs_h is abs_t:
         weight_h += weight_t
         num = weight_h
