@@ -202,11 +202,13 @@ class NumericModel:
         self.source_elements = tuple(elements)
         self._source_kinds = tuple(kinds)
         self._source_coef = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
-        self._source_rows = sp.lambdify(all_symbols, rows, modules="numpy", cse=True)
+        # code for the rows' structural non-zeros only (an elongation row touches one or two bodies), scattered
+        where = [(j * self.n_dof + k) for j, row in enumerate(rows) for k, v in enumerate(row) if v != 0]
+        entries = [v for row in rows for v in row if v != 0]
+        self._source_row_where = np.array(where, dtype=np.intp)
+        self._source_rows = sp.lambdify(all_symbols, entries, modules="numpy", cse=True)
         axis_set = set(self._axis_symbols)
-        self._source_rows_per_sample = any(
-            not sp.sympify(v).free_symbols <= axis_set for row in rows for v in row
-        )
+        self._source_rows_per_sample = any(not sp.sympify(v).free_symbols <= axis_set for v in entries)
         self._source_jac_entries, derivatives = _jacobian(coefficients, self._param_symbols)
         self._source_jac = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
 
@@ -241,15 +243,22 @@ class NumericModel:
         if self._source_rows_per_sample:
             rows = np.empty((n_b, n_s, n))
             for b in range(n_b):
-                rows[b] = np.asarray(self._source_rows(*pb[b], *pos), dtype=float).reshape(n_s, n)
+                rows[b] = self._source_row_matrix(pb[b], pos)
         else:
             cached = self._source_row_cache.get(pos)
             if cached is None:
-                cached = np.asarray(self._source_rows(*pb[0], *pos), dtype=float).reshape(n_s, n)
+                cached = self._source_row_matrix(pb[0], pos)
                 cached.setflags(write=False)
                 self._source_row_cache[pos] = cached
             rows = cached
         return DampingSources(self.source_names, self.source_elements, self._source_kinds, coef, rows, jac)
+
+    def _source_row_matrix(self, p: Array, pos: tuple[float, ...]) -> Array:
+        """The sources' elongation rows (n_sources, n_dof) at one parameter vector and position."""
+        rows = np.zeros(len(self.source_names) * self.n_dof)
+        if self._source_row_where.size:
+            rows[self._source_row_where] = np.asarray(self._source_rows(*p, *pos), dtype=float)
+        return rows.reshape(len(self.source_names), self.n_dof)
 
     def _plan(self, terms: list[Term]) -> _MatrixPlan:
         axis_set = set(self._axis_symbols)
