@@ -111,7 +111,7 @@ def retain_freed_memory() -> bool:
 
     Each chunk of samples allocates and frees a few (chunk, n, n) arrays of 0.1-2 MB. glibc serves such blocks
     with fresh ``mmap`` pages and returns freed heap tops to the kernel, so every chunk faults its pages in again:
-    on the 2-core test machine 16-20 % of the GSA's CPU time was system time. With arrays up to 64 MB taken from
+    on the 2-core test machine 16-20 % of the GSA's CPU time was system time. With arrays up to 32 MB taken from
     the heap and up to 512 MB of freed memory kept for reuse, that fell to 3 % and the GSA ran about 15 % faster
     (measured, benchmarks/bench_pipeline.py). The price is memory the process keeps after a large run. Nothing is
     changed on other C libraries, or when the user set one of glibc's ``MALLOC_*_`` variables.
@@ -131,10 +131,12 @@ def retain_freed_memory() -> bool:
     except OSError:
         return False
     m_trim_threshold, m_top_pad, m_mmap_threshold = -1, -2, -3  # <malloc.h>
-    ok = all(libc.mallopt(option, value) == 1 for option, value in (
-        (m_mmap_threshold, 64 << 20), (m_trim_threshold, 512 << 20), (m_top_pad, 16 << 20)))
-    _ALLOCATOR_TUNED = ok
-    return ok
+    # 32 MB is the largest mmap threshold every glibc accepts (HEAP_MAX_SIZE / 2 on 64-bit); each option is set
+    # on its own, so one refusal leaves the others in place
+    results = [libc.mallopt(option, value) == 1 for option, value in (
+        (m_mmap_threshold, 32 << 20), (m_trim_threshold, 512 << 20), (m_top_pad, 16 << 20))]
+    _ALLOCATOR_TUNED = all(results)
+    return _ALLOCATOR_TUNED
 
 
 class Executor:
