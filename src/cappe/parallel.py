@@ -112,8 +112,9 @@ def retain_freed_memory() -> bool:
     Each chunk of samples allocates and frees a few (chunk, n, n) arrays of 0.1-2 MB. glibc serves such blocks
     with fresh ``mmap`` pages and returns freed heap tops to the kernel, so every chunk faults its pages in again:
     on the 2-core test machine 16-20 % of the GSA's CPU time was system time. With arrays up to 32 MB taken from
-    the heap and up to 512 MB of freed memory kept for reuse, that fell to 3 % and the GSA ran about 15 % faster
-    (measured, benchmarks/bench_pipeline.py). The price is memory the process keeps after a large run. Nothing is
+    the heap and up to 512 MB of freed memory kept for reuse, that fell to 3 % and the GSA ran about 14 % faster
+    (three interleaved pairs of runs, the machine tool's GSA at N = 512 on two threads). The price is memory the
+    process keeps after a large run. Nothing is
     changed on other C libraries, or when the user set one of glibc's ``MALLOC_*_`` variables.
     """
     global _ALLOCATOR_TUNED
