@@ -839,9 +839,9 @@ class AutomatedIdentification(Estimator):
              rng: np.random.Generator) -> ParameterEstimate:
         runner = Executor.coerce(self.executor, self.n_workers)
         try:
-            # BLAS on one thread in the calling thread too: its serial stages (the refinements' least squares on
-            # Jacobians of about 10 000 x 27) ran 2-10x slower on two OpenBLAS threads than on one (measured,
-            # benchmarks/bench_pipeline.py); the parallelism is over samples, on the executor
+            # BLAS on one thread in the calling thread too: the refinements' least squares take an SVD of a Jacobian
+            # of about 10 000 x 27 per step, measured 51 ms on two OpenBLAS threads against 6 ms on one (the
+            # stiffness refinement 1.9 -> 0.6 s in benchmarks/bench_pipeline.py); the parallelism is over samples
             with single_threaded_blas():
                 return self._stages(model, space, data, rng, runner)
         finally:
