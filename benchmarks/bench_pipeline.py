@@ -8,9 +8,10 @@ The run happens in a child process so that its peak memory (``ru_maxrss``) is it
 makes is counted by wrapping numpy's ``eigh`` and ``eig`` (matrices and their sizes); after the run the same
 number of solves of the same sizes is timed bare (batched LAPACK, BLAS on one thread): serially
 (``eigen_serial_s``), and split over one thread per core running at once (``bound_s``, the time no implementation
-of the same algorithm could beat on this machine: two cores of the test machine run bare ``eigh`` 1.8x, not 2x,
-as fast as one). Reported: wall time (model compilation included), time per stage, peak memory, ``wall_s /
-bound_s``, and ``ideal_ratio = wall_s / (eigen_serial_s / cores)`` against perfect scaling.
+of the same algorithm could beat on this machine: two cores of the shared test machine run bare ``eigh`` 1.45-2x
+as fast as one, depending on the host's load; the best of three attempts is taken). Reported: wall time (model
+compilation included), time per stage, peak memory, ``wall_s / bound_s``, and ``ideal_ratio = wall_s /
+(eigen_serial_s / cores)`` against perfect scaling.
 """
 
 from __future__ import annotations

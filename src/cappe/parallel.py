@@ -15,6 +15,9 @@ so results do not depend on the chunk size, the number of workers or where the c
 - ``"tcp://HOST:PORT"`` (or any address ``dask.distributed.Client`` accepts): an existing Dask cluster; the
   function is scattered once to every worker, chunks run as tasks. ``dask-jobqueue`` (HPC batch systems) and
   ``dask-kubernetes`` clusters expose such an address too.
+
+The first map also tunes glibc's allocator of this process to keep freed memory for reuse
+(:func:`retain_freed_memory`; set a ``MALLOC_*_`` variable to keep glibc's defaults).
 """
 
 from __future__ import annotations
@@ -102,6 +105,7 @@ def single_threaded_blas() -> Iterator[None]:
 
 
 _ALLOCATOR_TUNED = False
+_ALLOCATOR_TRIED = False
 #: glibc's own settings of the same knobs; where the user set one, cappe leaves the allocator alone.
 _MALLOC_VARIABLES = ("MALLOC_MMAP_THRESHOLD_", "MALLOC_TRIM_THRESHOLD_", "MALLOC_TOP_PAD_", "MALLOC_MMAP_MAX_")
 
@@ -115,12 +119,16 @@ def retain_freed_memory() -> bool:
     the heap and up to 512 MB of freed memory kept for reuse, that fell to 3 % and the GSA ran about 14 % faster
     (three interleaved pairs of runs, the machine tool's GSA at N = 512 on two threads). The price is memory the
     process keeps after a large run. Nothing is
-    changed on other C libraries, or when the user set one of glibc's ``MALLOC_*_`` variables.
+    changed on other C libraries, or when the user set one of glibc's ``MALLOC_*_`` variables or a
+    ``glibc.malloc`` tunable (``GLIBC_TUNABLES``). :meth:`Executor.map` calls it (in the calling process).
     """
-    global _ALLOCATOR_TUNED
-    if _ALLOCATOR_TUNED:
-        return True
-    if sys.platform != "linux" or any(v in os.environ for v in _MALLOC_VARIABLES):
+    global _ALLOCATOR_TUNED, _ALLOCATOR_TRIED
+    if _ALLOCATOR_TRIED:
+        return _ALLOCATOR_TUNED
+    _ALLOCATOR_TRIED = True
+    user_set = any(v in os.environ for v in _MALLOC_VARIABLES) or "glibc.malloc." in os.environ.get(
+        "GLIBC_TUNABLES", "")
+    if sys.platform != "linux" or user_set:
         return False
     import ctypes
     import platform

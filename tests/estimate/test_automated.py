@@ -473,13 +473,13 @@ def test_exact_problem_names_missing_modes(two_mass):
 
 def test_validation_frf_criteria_equal_the_correlate_functions():
     from cappe.correlate import csf, frac
-    from cappe.estimate._validation import _frf_criteria
+    from cappe.estimate._validation import _line_criteria
 
     rng = np.random.default_rng(4)
     h_ref = rng.standard_normal((3, 2, 50)) + 1j * rng.standard_normal((3, 2, 50))
     h_mod = h_ref * (1 + 0.3 * rng.standard_normal((3, 2, 50)))
     h_ref[1, 0] *= 1e-12  # negligible reference power: left out
-    frac_v, csf_v = _frf_criteria(h_mod, h_ref)
+    frac_v, csf_v = _line_criteria(np.moveaxis(h_mod, -1, 0), np.moveaxis(h_ref, -1, 0))  # lines first
     assert np.isnan(frac_v[1, 0])
     assert np.isnan(csf_v[1, 0])
     for o, i in [(0, 0), (2, 1), (1, 1)]:

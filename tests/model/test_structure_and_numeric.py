@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
+from cappe.exceptions import ModelError
 from cappe.model import NumericModel, StructureBuilder, derive
 from cappe.model._expressions import symbol
 from cappe.model.loader import structure_from_yaml
@@ -226,3 +227,15 @@ def test_spindle_k_differs_from_printed_appendix_exactly_in_six_entries(spindle)
     diff = sp.simplify(spindle_k_in_thesis_symbols(spindle) - thesis_k(corrected=False))
     wrong = {(i, j) for i in range(11) for j in range(11) if diff[i, j] != 0}
     assert wrong == {(0, 7), (0, 9), (3, 7), (3, 9), (8, 8), (9, 9)}
+
+
+def test_affine_terms_rebuild_the_matrices_and_name_a_wrong_matrix():
+    nm = NumericModel(structure_from_yaml(YAML, "model.yaml"))
+    batch = nm.nominal * np.random.default_rng(5).uniform(0.7, 1.3, size=(4, nm.nominal.size))
+    terms = nm.affine_terms(("M", "K", "C"), batch, {"z": 0.3})
+    mats = nm.matrices(batch, {"z": 0.3})
+    for name, (coef, patterns) in terms.items():
+        assert not patterns.flags.writeable  # shared with the model's cache
+        np.testing.assert_allclose(np.einsum("bt,tij->bij", coef, patterns), mats[name], rtol=1e-13, atol=1e-9)
+    with pytest.raises(ModelError, match=r"matrix must be one of \('M', 'C', 'K', 'G', 'H'\); got 'D'"):
+        nm.affine_terms(("K", "D"), batch)

@@ -247,17 +247,10 @@ def _truth_receptance(model: NumericModel, truth: bytes, position: tuple[tuple[s
     return out
 
 
-def _frf_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
-    """FRAC and line-averaged CSF of every FRF pair ``[out, in]`` (NaN where the reference is negligible).
-
-    The formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf` (one output per FRF); the arrays
-    are (..., n_freq), frequency last (see :func:`_line_criteria` for the streamed form).
-    """
-    return _line_criteria(np.moveaxis(h_mod, -1, 0), np.moveaxis(h_ref, -1, 0))
-
-
 def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
-    """:func:`_frf_criteria` of line-major arrays ``(n_freq, ...)``, accumulated over blocks of lines.
+    """FRAC and line-averaged CSF of every FRF ``[..., out, in]`` of line-major arrays ``(n_freq, ...)`` (NaN where
+    the reference is negligible): the formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf`
+    (one output per FRF), accumulated over blocks of lines.
 
     Per FRF it sums ``|H_a|^2``, ``|H_x|^2``, ``conj(H_x) H_a`` and the line's CSF
     ``2 |H_a| |H_x| / (|H_a|^2 + |H_x|^2)`` (1 where both are zero) over the lines; a block of lines is small

@@ -1,10 +1,11 @@
 """Batched modal engine: many parameter vectors x axis positions -> modes, damping, shapes.
 
-Per chunk of samples: assemble M, K (and the damping sources) from the affine terms, reduce
-``K phi = lambda M phi`` with the Cholesky factor ``M = L L^T`` to the symmetric ``L^-1 K L^-T``, solve all
-problems with one batched ``eigh``, map back to mass-normalized shapes, and form the first-order damping
-ratios from the modal elongations of the damping sources. Chunks run on threads (see
-:mod:`cappe.parallel`); every sample goes through the same arithmetic whatever the chunk it lands in.
+Per chunk of samples: reduce ``K phi = lambda M phi`` with the Cholesky factor ``M = L L^T`` to the symmetric
+``L^-1 K L^-T`` (for samples with the model's nominal M, from stiffness patterns reduced once per position; for the
+others, from their own assembled M and K), solve all problems with one batched ``eigh``, map back to
+mass-normalized shapes, and form the sensor shapes and the first-order damping ratios from the modal elongations
+of the damping sources (one sparse product). Chunks run on threads (see :mod:`cappe.parallel`); every sample goes
+through the same arithmetic whatever the chunk it lands in (tested bit for bit over chunk sizes).
 """
 
 from __future__ import annotations
@@ -467,14 +468,16 @@ class ModalEngine:
         else:
             # sensor channels and element elongations are sparse rows (a few DOFs of one or two bodies): one
             # sparse product over every mode of the chunk (each entry a fixed-order sum, whatever the chunk) instead
-            # of two dense batched products, 81 x 45 and 64 x 45 per mode on the machine tool
+            # of two dense batched products, 81 x 45 and 70 x 45 per mode on the machine tool
             stacked = self._stacked_rows(position, sensor_rows, sources.rows)
             m = phi.shape[2]
             flat = np.ascontiguousarray(phi.transpose(1, 0, 2)).reshape(n, b * m)
             proj = (stacked @ flat).reshape(-1, b, m)
             n_s = sensor_rows.shape[0]
             shapes = np.ascontiguousarray(proj[:n_s].transpose(1, 0, 2))
-            elongation = proj[n_s:].transpose(1, 0, 2)
+            # contiguous: the per-sample products of _first_order_damping must see the same layout whatever the
+            # chunk size (BLAS sums a strided operand in another order)
+            elongation = np.ascontiguousarray(proj[n_s:].transpose(1, 0, 2))
         zeta, contrib, gradient = _first_order_damping(sources, elongation, omega, contributions)
         poles = cshapes = None
         if exact:
@@ -586,23 +589,26 @@ class _NominalReduction:
 
     def __init__(self, model: NumericModel, position: Mapping[str, float] | None,
                  groups: list[NDArray[np.intp]]) -> None:
-        self.model, self.position, self.groups = model, position, groups
-        self.mass_coefficients = model.affine_terms(("M",), model.nominal, position)["M"][0][0]
+        # snapshots: the caller's position mapping and the model's nominal vector may change after this
+        self.model, self.groups = model, groups
+        self.position = dict(zip(model.axis_names, model.position_vector(position), strict=True))
+        self.nominal = model.nominal.copy()
+        self.mass_coefficients = model.affine_terms(("M",), self.nominal, self.position)["M"][0][0]
         self._factor: tuple[Any, NDArray[np.intp], Any, Array] | None = None
 
     def _factored(self) -> tuple[Any, NDArray[np.intp], Any, Array]:
         if self._factor is None:
             model = self.model
-            mass = model.matrices(model.nominal[None, :], self.position, names=("M",))["M"]
+            mass = model.matrices(self.nominal[None, :], self.position, names=("M",))["M"]
             try:
                 linv = _inverse_cholesky(mass, self.groups, 0)[0]
             except ModelError as exc:
                 msg = (f"the nominal mass matrix of model '{model.structure.name}' at position "
-                       f"{dict(self.position or {})} is not positive definite (non-physical masses or inertias); "
+                       f"{self.position} is not positive definite (non-physical masses or inertias); "
                        "samples with those masses have no modes")
                 raise ModelError(msg) from exc
             linv_t = np.ascontiguousarray(linv.T)
-            patterns = model.affine_terms(("K",), model.nominal, self.position)["K"][1]
+            patterns = model.affine_terms(("K",), self.nominal, self.position)["K"][1]
             flat = (linv @ patterns @ linv_t).reshape(patterns.shape[0], -1)
             nz = np.flatnonzero(np.any(flat != 0, axis=0))
             # L^-T is block-diagonal like M (bodies): sparse
@@ -618,10 +624,11 @@ class _NominalReduction:
         return out.reshape(-1, n, n)
 
     def shapes(self, vectors: Array) -> Array:
-        """``L^-T v`` (B, n, m): a view of an (n, B, m) array, the layout of the engine's sparse projections."""
+        """``L^-T v`` (B, n, m), C-contiguous like :class:`_MassReduction`'s (consumers' BLAS products then sum in
+        the same order whichever reduction a sample took)."""
         b, n, m = vectors.shape
         flat = np.ascontiguousarray(vectors.transpose(1, 0, 2)).reshape(n, b * m)
-        return np.asarray(self._factored()[0] @ flat).reshape(n, b, m).transpose(1, 0, 2)
+        return np.ascontiguousarray(np.asarray(self._factored()[0] @ flat).reshape(n, b, m).transpose(1, 0, 2))
 
     def inverse_mass(self) -> Array:
         return self._factored()[3]
