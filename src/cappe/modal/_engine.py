@@ -583,8 +583,8 @@ class _NominalReduction:
     stiffness is then the sparse sum ``sum_j f_j(p) L^-1 P_j L^-T`` of its coefficients, with no assembly of M and
     K, no factorization and no dense products per sample: measured 61 -> 21 us per sample on the 45-DOF machine
     tool (chunks of 64, a one-off timing), and the engine at 0.87-0.90 of the bare eigh bound with known masses
-    against 0.77-0.83 with varying ones (benchmarks/bench_modal.py, n_dof 30-150). The factor is formed on first use, so a model whose
-    nominal M is not positive definite fails only when a sample has that M.
+    against 0.77-0.83 with varying ones (benchmarks/bench_modal.py, n_dof 30-150). The factor is formed on first
+    use, so a model whose nominal M is not positive definite fails only when a sample has that M.
     """
 
     def __init__(self, model: NumericModel, position: Mapping[str, float] | None,
