@@ -118,9 +118,9 @@ def retain_freed_memory() -> bool:
     on the 2-core test machine 16-20 % of the GSA's CPU time was system time. With arrays up to 32 MB taken from
     the heap and up to 512 MB of freed memory kept for reuse, that fell to 3 % and the GSA ran about 14 % faster
     (three interleaved pairs of runs, the machine tool's GSA at N = 512 on two threads). The price is memory the
-    process keeps after a large run. Nothing is
-    changed on other C libraries, or when the user set one of glibc's ``MALLOC_*_`` variables or a
-    ``glibc.malloc`` tunable (``GLIBC_TUNABLES``). :meth:`Executor.map` calls it (in the calling process).
+    process keeps after a large run. Nothing is changed on other C libraries, or when the user set one of glibc's
+    ``MALLOC_*_`` variables or a ``glibc.malloc`` tunable (``GLIBC_TUNABLES``). :meth:`Executor.map` calls it (in
+    the calling process).
     """
     global _ALLOCATOR_TUNED, _ALLOCATOR_TRIED
     if _ALLOCATOR_TRIED:

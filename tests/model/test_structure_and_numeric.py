@@ -239,3 +239,18 @@ def test_affine_terms_rebuild_the_matrices_and_name_a_wrong_matrix():
         np.testing.assert_allclose(np.einsum("bt,tij->bij", coef, patterns), mats[name], rtol=1e-13, atol=1e-9)
     with pytest.raises(ModelError, match=r"matrix must be one of \('M', 'C', 'K', 'G', 'H'\); got 'D'"):
         nm.affine_terms(("K", "D"), batch)
+    with pytest.raises(ModelError, match=r"matrix must be one of \('M', 'C', 'K', 'G', 'H'\); got 'D'"):
+        nm.matrix_parameters("D")
+
+
+def test_matrix_parameters_are_those_that_move_the_matrix():
+    # independent check: perturbing a parameter changes the matrix exactly when it is listed
+    nm = NumericModel(structure_from_yaml(YAML, "model.yaml"))
+    for name in ("M", "K", "C"):
+        listed = set(nm.matrix_parameters(name))
+        base = nm.matrices(nm.nominal, {"z": 0.3})[name]
+        for i, p in enumerate(nm.parameter_names):
+            moved = nm.nominal.copy()
+            moved[i] *= 1.5
+            changed = not np.array_equal(nm.matrices(moved, {"z": 0.3})[name], base)
+            assert changed == (p in listed), (name, p)

@@ -377,17 +377,14 @@ class ModalEngine:
         """The matrices the chunk needs (all five with ``exact``, else none or M and K), the reduction of each sample
         and the reduced stiffness ``L^-1 K L^-T`` (B, n, n).
 
-        Samples whose mass matrix is the model's nominal one (known masses, as in the GSA and the stiffness
+        Samples whose mass parameters have their nominal values (known masses, as in the GSA and the stiffness
         subproblems) take :class:`_NominalReduction`; the others factor their own M. Which way a sample goes
         depends on that sample only, so the results do not depend on the chunk it lands in.
         """
         model = self.model
         groups = self._mass_groups(position)
         nominal = self._nominal_reduction(position) if model.is_affine else None
-        shared = None
-        if nominal is not None:
-            terms = model.affine_terms(("M", "K"), pb, position)
-            shared = np.all(terms["M"][0] == nominal.mass_coefficients, axis=1)
+        shared = None if nominal is None else nominal.shares_mass(pb)
         if shared is None or not shared.any():
             mats = model.matrices(pb, position, names=MATRIX_NAMES if exact else ("M", "K"))
             reduction = _MassReduction(mats["M"], groups, offset)
@@ -395,7 +392,7 @@ class ModalEngine:
         assert nominal is not None  # shared is only set with a nominal reduction
         mats = model.matrices(pb, position) if exact else {}
         reduced = np.empty((pb.shape[0], model.n_dof, model.n_dof))
-        reduced[shared] = nominal.reduce(terms["K"][0][shared])
+        reduced[shared] = nominal.reduce(model.affine_terms(("K",), pb[shared], position)["K"][0])
         if shared.all():
             return mats, _Reductions(shared, nominal, None), reduced
         rest = np.flatnonzero(~shared)
@@ -593,8 +590,13 @@ class _NominalReduction:
         self.model, self.groups = model, groups
         self.position = dict(zip(model.axis_names, model.position_vector(position), strict=True))
         self.nominal = model.nominal.copy()
-        self.mass_coefficients = model.affine_terms(("M",), self.nominal, self.position)["M"][0][0]
+        self._mass_columns = [model.parameter_names.index(p) for p in model.matrix_parameters("M")]
         self._factor: tuple[Any, NDArray[np.intp], Any, Array] | None = None
+
+    def shares_mass(self, params: Array) -> NDArray[np.bool_]:
+        """Which samples (B, n_params) have the nominal M: their mass parameters equal the nominal values."""
+        cols = self._mass_columns
+        return np.asarray(np.all(params[:, cols] == self.nominal[cols], axis=1))
 
     def _factored(self) -> tuple[Any, NDArray[np.intp], Any, Array]:
         if self._factor is None:

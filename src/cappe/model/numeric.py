@@ -350,6 +350,25 @@ class NumericModel:
         count, labels = connected_components(graph, directed=False)
         return [np.flatnonzero(labels == k) for k in range(count)]
 
+    def matrix_parameters(self, name: str) -> tuple[str, ...]:
+        """The parameters matrix ``name`` depends on (in ``parameter_names`` order).
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> NumericModel(load_model("builtin:two-mass-rig")).matrix_parameters("M")
+        ('m1', 'm2')
+        """
+        if name not in self._slices:
+            msg = f"matrix must be one of {MATRIX_NAMES}; got {name!r}"
+            raise ModelError(msg)
+        rows = self._slices[name]
+        used = {i for j, i in self._jacobian_entries if rows.start <= j < rows.stop}
+        plan = self._plans[name]
+        if plan.residual is not None:
+            used |= {i for i, sym in enumerate(self._param_symbols) if sym in plan.residual.free_symbols}
+        return tuple(self.parameter_names[i] for i in sorted(used))
+
     def affine_terms(
         self, names: Sequence[str], params: ParamsLike = None, position: Mapping[str, float] | None = None
     ) -> dict[str, tuple[Array, Array]]:
