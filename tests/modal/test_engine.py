@@ -255,6 +255,7 @@ def test_fewer_modes_than_dofs_give_the_same_bits_in_any_chunk(spindle, kwargs):
     # arrays whose strides depend on the chunk size unless the engine lays them out contiguously
     model = NumericModel(spindle)
     params = random_params(model, 9, seed=8)
+    kwargs = dict(kwargs)  # the parametrized dict is shared: leave it as given
     n_modes = kwargs.pop("n_modes")
     whole = ModalEngine(model, chunk_size=64, n_workers=1, n_modes=n_modes).evaluate(params, **kwargs)
     for chunk in (1, 2, 4):
