@@ -254,3 +254,26 @@ def test_matrix_parameters_are_those_that_move_the_matrix():
             moved[i] *= 1.5
             changed = not np.array_equal(nm.matrices(moved, {"z": 0.3})[name], base)
             assert changed == (p in listed), (name, p)
+
+
+def test_coefficients_in_product_form_and_generated_code_agree_with_sympy():
+    # the batched evaluator takes p_a * p_b * g(axes) itself and leaves everything else to generated code;
+    # both must give what sympy's own evaluation of each expression gives, in every batch layout
+    from cappe.model.numeric import _Coefficients
+
+    a, b, c, z = sp.symbols("a b c z")
+    expressions = [a, 3 * b, a * b * sp.Abs(z - sp.Rational(1, 3)), sp.Integer(0), a**2, b * sp.sin(a),
+                   sp.Rational(7, 2) * z + 1, c * (z + 2), a * b * c]
+    evaluator = _Coefficients(expressions, [a, b, c], [z])
+    assert evaluator._slow.tolist() == [4, 5, 8]  # a**2, b sin(a) and a b c are not products of two parameters
+    rng = np.random.default_rng(3)
+    pb = rng.uniform(0.5, 2.0, size=(5, 3))
+    got = evaluator(pb, (0.25,))
+    want = np.array([[float(e.subs({a: row[0], b: row[1], c: row[2], z: 0.25})) for e in expressions] for row in pb])
+    np.testing.assert_allclose(got, want, rtol=1e-15, atol=0)
+    assert got.flags.c_contiguous
+    for k in range(5):  # one sample at a time: the same bits
+        np.testing.assert_array_equal(evaluator(pb[k:k + 1], (0.25,)), got[k:k + 1])
+    only_fast = _Coefficients(expressions[:4], [a, b, c], [z])
+    assert only_fast(pb, (0.25,)).flags.c_contiguous
+    np.testing.assert_allclose(only_fast(pb, (-1.0,))[:, 2], pb[:, 0] * pb[:, 1] * (4 / 3), rtol=1e-15)

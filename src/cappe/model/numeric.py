@@ -91,6 +91,96 @@ def _jacobian(expressions: Sequence[sp.Expr], symbols: Sequence[sp.Symbol]) -> t
     return entries, derivatives
 
 
+class _Coefficients:
+    """Batched evaluation of a list of coefficient expressions in the parameters and axis positions.
+
+    Most coefficients of a lumped-parameter model are a parameter, or a product of two (a loss factor times a
+    stiffness), times a factor of the axis positions only (the share of a guide's stiffness a carriage takes at
+    ``z``). Those are evaluated as ``p_a * p_b * g(r)`` over the whole batch with ``g`` computed once per
+    position: three array operations instead of one generated-code output per coefficient, each copied into
+    the result (measured on the 45-DOF machine tool, 158 coefficients and 70 damping sources: 0.19 + 0.18 ms
+    fixed per engine call and ~7 us per sample before, with line_profiler on chunks of 4 and 64). The others
+    keep generated code (sympy's ``lambdify``).
+    """
+
+    def __init__(self, expressions: Sequence[sp.Expr], parameters: Sequence[sp.Symbol],
+                 axes: Sequence[sp.Symbol]) -> None:
+        self.size = len(expressions)
+        index = {sym: i for i, sym in enumerate(parameters)}
+        axis_set = set(axes)
+        ones = len(parameters)  # the column of ones appended to the batch: a missing second factor
+        fast: list[int] = []
+        pairs: list[tuple[int, int]] = []
+        factors: list[sp.Expr] = []
+        slow: list[int] = []
+        for j, expr in enumerate(expressions):
+            found = _product_form(sp.sympify(expr), index, axis_set)
+            if found is None:
+                slow.append(j)
+                continue
+            params, factor = found
+            fast.append(j)
+            padded = params + [ones, ones]
+            pairs.append((padded[0], padded[1]))
+            factors.append(factor)
+        self._fast = np.array(fast, dtype=np.intp)
+        self._first = np.array([a for a, _ in pairs], dtype=np.intp)
+        self._second = np.array([b for _, b in pairs], dtype=np.intp)
+        self._slow = np.array(slow, dtype=np.intp)
+        self._factor_func = sp.lambdify(list(axes), factors, modules="numpy", cse=True)
+        self._factor_cache: dict[tuple[float, ...], Array] = {}
+        all_symbols = list(parameters) + list(axes)
+        self._slow_func = sp.lambdify(all_symbols, [expressions[j] for j in slow], modules="numpy", cse=True)
+
+    def _factors(self, pos: tuple[float, ...]) -> Array:
+        cached = self._factor_cache.get(pos)
+        if cached is None:
+            cached = np.array([float(v) for v in self._factor_func(*pos)], dtype=float)
+            cached.setflags(write=False)
+            self._factor_cache[pos] = cached
+        return cached
+
+    def __call__(self, pb: Array, pos: tuple[float, ...]) -> Array:
+        """The coefficients (B, n) for a batch of parameter vectors (B, n_params) at one position."""
+        b = pb.shape[0]
+        if self._fast.size:
+            ext = np.empty((b, pb.shape[1] + 1))
+            ext[:, :-1] = pb
+            ext[:, -1] = 1.0
+            # np.take lays the result out C-contiguous (ext[:, index] is column-major): consumers' BLAS products
+            # then sum in the same order whatever the batch size
+            values = np.take(ext, self._first, axis=1)
+            values *= np.take(ext, self._second, axis=1)
+            values *= self._factors(pos)
+            if not self._slow.size:  # every coefficient in product form (the usual case): in order already
+                return values
+        out = np.empty((b, self.size))
+        if self._fast.size:
+            out[:, self._fast] = values
+        if self._slow.size:
+            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(b, v) for v in pos]
+            for j, v in zip(self._slow, self._slow_func(*args), strict=True):
+                out[:, j] = v
+        return out
+
+
+def _product_form(expr: sp.Expr, index: Mapping[sp.Symbol, int],
+                  axes: set[sp.Symbol]) -> tuple[list[int], sp.Expr] | None:
+    """``expr`` as (at most two parameter columns, a factor of the axes only), or None if it is not of that form."""
+    params: list[int] = []
+    rest: list[sp.Expr] = []
+    for factor in sp.Mul.make_args(expr):
+        if factor in index:
+            params.append(index[factor])
+        elif factor.free_symbols <= axes:
+            rest.append(factor)
+        else:
+            return None
+    if len(params) > 2:
+        return None
+    return params, sp.Mul(*rest)
+
+
 def compile_model(model: Structure | SymbolicModel) -> NumericModel:
     """Compile a Structure (or its SymbolicModel) into a NumericModel."""
     return NumericModel(model)
@@ -131,7 +221,7 @@ class NumericModel:
             self._slices[name] = slice(start, len(coefficients))
         all_symbols = self._param_symbols + self._axis_symbols
         self._n_coef = len(coefficients)
-        self._coefficients = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
+        self._coefficients = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
         # patterns are mostly zeros: generate code for the structural non-zeros only and scatter them (printing
         # every entry of every dense pattern took most of the compile time of a 45-DOF model)
         self._pattern_funcs: dict[str, tuple[int, NDArray[np.intp], Any]] = {}
@@ -201,7 +291,7 @@ class NumericModel:
         self.source_names = tuple(names)
         self.source_elements = tuple(elements)
         self._source_kinds = tuple(kinds)
-        self._source_coef = sp.lambdify(all_symbols, coefficients, modules="numpy", cse=True)
+        self._source_coef = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
         # code for the rows' structural non-zeros only (an elongation row touches one or two bodies), scattered
         where = [(j * self.n_dof + k) for j, row in enumerate(rows) for k, v in enumerate(row) if v != 0]
         entries = [v for row in rows for v in row if v != 0]
@@ -231,12 +321,10 @@ class NumericModel:
         pb = p if p.ndim == 2 else p[None, :]
         pos = self.position_vector(position)
         n_b, n_s, n = pb.shape[0], len(self.source_names), self.n_dof
-        args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(n_b, v) for v in pos]
-        coef = np.empty((n_b, n_s))
-        for j, v in enumerate(self._source_coef(*args) if n_s else []):
-            coef[:, j] = v
+        coef = self._source_coef(pb, pos)
         jac = np.zeros((n_b, n_s, pb.shape[1])) if jacobian else None
         if jac is not None and self._source_jac_entries:
+            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(n_b, v) for v in pos]
             for (j, i), v in zip(self._source_jac_entries, self._source_jac(*args), strict=True):
                 jac[:, j, i] = v
         rows: Array
@@ -407,12 +495,7 @@ class NumericModel:
         return out
 
     def _coefficient_values(self, pb: Array, pos: tuple[float, ...]) -> Array:
-        args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]
-        coef = np.empty((pb.shape[0], self._n_coef))
-        if self._n_coef:
-            for j, v in enumerate(self._coefficients(*args)):
-                coef[:, j] = v
-        return coef
+        return self._coefficients(pb, pos)
 
     # -- evaluation -------------------------------------------------------------------------------
     def matrices(
