@@ -947,9 +947,21 @@ class AutomatedIdentification(Estimator):
             candidates = _alternative_starts(subproblems, space, selected, modal_names, int(self.refine_starts))
             best: tuple[Array, dict[str, Any]] | None = None
             runs = []
-            for label, vector in tqdm(candidates, desc="stiffness refinement", unit="start",
-                                      disable=not self.progress):
-                found, info = self._refine(model, space, ident_ref, vector, modal_names, (w_f, 0.0, w_s), caught)
+            # independent local refinements: side by side on a thread executor (numpy's solves release the GIL);
+            # their warnings are recorded here, around all of them (catch_warnings is process-wide state)
+            local = runner if runner.kind == "threads" else Executor("serial")
+            refine_bar: Any = tqdm(total=len(candidates), desc="stiffness refinement", unit="start",
+                                   disable=not self.progress)
+            with warnings.catch_warnings(record=True) as record:
+                warnings.simplefilter("always")
+                try:
+                    refined = local.map(
+                        lambda c: self._refine(model, space, ident_ref, c[1], modal_names, (w_f, 0.0, w_s)),
+                        candidates, done=lambda _: refine_bar.update(1))
+                finally:
+                    refine_bar.close()
+            caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
+            for (label, _), (found, info) in zip(candidates, refined, strict=True):
                 runs.append({"start": label, "cost_before": info["cost_before"], "cost_after": info["cost_after"]})
                 if best is None or info["cost_after"] < best[1]["cost_after"] * (1 - 1e-9):
                     best = (found, {**info, "start": label})
@@ -985,8 +997,11 @@ class AutomatedIdentification(Estimator):
         if self.exact:
             final, joint = self._refine_exact(model, space, ident_ref, current, (w_f, w_z, w_s), runner)
         else:
-            final, joint = self._refine(model, space, ident_ref, current, list(space.names), (w_f, w_z, w_s),
-                                        caught, keep=True)
+            with warnings.catch_warnings(record=True) as record:
+                warnings.simplefilter("always")
+                final, joint = self._refine(model, space, ident_ref, current, list(space.names), (w_f, w_z, w_s),
+                                            keep=True)
+            caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
         timings["joint_refinement"] = time.perf_counter() - t
         estimate: ParameterEstimate = joint.pop("estimate")
 
@@ -1087,11 +1102,12 @@ class AutomatedIdentification(Estimator):
         current: Array,
         names: list[str],
         weights: tuple[float, float, float],
-        caught: list[str],
         *,
         keep: bool = False,
     ) -> tuple[Array, dict[str, Any]]:
-        """Modal updating over ``names`` from ``current`` (other unknowns fixed); cost before/after, changes."""
+        """Modal updating over ``names`` from ``current`` (other unknowns fixed); cost before/after, changes.
+
+        The caller records the fit's warnings."""
         fixed = {n: float(v) for n, v in zip(space.names, current, strict=True) if n not in names}
         known = {n: float(v) for n, v in zip(model.parameter_names, space.base, strict=True)}
         known.update(fixed)
@@ -1102,10 +1118,7 @@ class AutomatedIdentification(Estimator):
         sub_space = ParameterSpace.from_model(model, names, bounds=bounds, start=start, values=known)
         problem = updater._problem(model, sub_space, reference)
         r0 = problem.residuals(sub_space.start)
-        with warnings.catch_warnings(record=True) as record:
-            warnings.simplefilter("always")
-            updater.fit(reference)
-        caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
+        updater.fit(reference)
         est = updater.estimate_
         out = current.copy()
         out[idx] = est.values
