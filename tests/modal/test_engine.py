@@ -278,3 +278,44 @@ def test_nominal_reduction_is_made_at_the_position_it_was_asked_for(slide):
     got = engine.evaluate(np.tile(model.nominal, (2, 1)), {"z": 0.1})
     fresh = ModalEngine(model, n_workers=1).evaluate(np.tile(model.nominal, (2, 1)), {"z": 0.1})
     np.testing.assert_array_equal(got.frequency, fresh.frequency)
+
+
+@pytest.mark.parametrize("kwargs", [{}, {"full_shapes": True, "contributions": True}, {"exact": True},
+                                    {"track": True}])
+def test_samples_sharing_a_stiffness_share_one_eigen_solve_and_keep_their_bits(slide, kwargs, monkeypatch):
+    # a Saltelli design repeats each base sample's stiffness in the columns of the damping unknowns: those
+    # samples take one eigen-solve between them, and every result is what the sample alone gives
+    model = NumericModel(slide)
+    damping = [i for i, p in enumerate(slide.parameters) if p.kind in ("damping", "loss")]
+    stiffness = [i for i, p in enumerate(slide.parameters) if p.kind == "stiffness"]
+    assert damping and stiffness
+    base = random_params(model, 3, seed=11)
+    base[:, [i for i, p in enumerate(slide.parameters) if p.kind in ("mass", "inertia")]] = model.nominal[
+        [i for i, p in enumerate(slide.parameters) if p.kind in ("mass", "inertia")]]
+    rows = []
+    rng = np.random.default_rng(12)
+    for b in base:  # each base sample, then copies with other damping
+        rows.append(b)
+        for i in damping:
+            other = b.copy()
+            other[i] *= rng.uniform(0.5, 1.5)
+            rows.append(other)
+    params = np.array(rows)
+    solves = []
+    original = np.linalg.eigh
+
+    def counted(a, *args, **kw):
+        solves.append(np.asarray(a).shape[0])
+        return original(a, *args, **kw)
+
+    monkeypatch.setattr(np.linalg, "eigh", counted)
+    batch = ModalEngine(model, n_workers=1, chunk_size=64).evaluate(params, {"z": 0.2}, **kwargs)
+    assert solves[-1] == 3  # three distinct stiffnesses (with track, the nominal reference was solved before)
+    assert len(np.unique(batch.damping, axis=0)) == len(params)  # the damping still differs
+    for k in range(len(params)):
+        alone = ModalEngine(model, n_workers=1).evaluate(params[k:k + 1], {"z": 0.2}, **kwargs)
+        for name in ("frequency", "damping", "shapes", "full_shapes", "mode_index", "tracking_mac", "contributions",
+                     "damping_gradient", "poles", "complex_shapes"):
+            got = getattr(batch, name)
+            if got is not None:
+                np.testing.assert_array_equal(got[k:k + 1], getattr(alone, name), err_msg=f"{name} of sample {k}")
