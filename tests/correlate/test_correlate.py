@@ -550,3 +550,34 @@ def test_macxp_paired_is_the_diagonal_of_macxp_over_a_batch():
     for b in range(4):
         # same formula, evaluated as an outer product: equal to round-off
         np.testing.assert_allclose(paired[b], np.diag(macxp(phi_a[b], lam_a[b], phi_x, lam_x)), rtol=1e-13)
+
+
+@pytest.mark.parametrize("reference", ["complex", "real", "one complex mode"])
+def test_macxp_batch_of_real_shapes_matches_macxp_including_undamped_limits(reference):
+    # the batch form evaluates real model shapes in squared weights; it must give macxp's values, also where
+    # poles are undamped (0 / 0 limits: equal undamped poles give the MAC, different ones 0)
+    from cappe.correlate import macxp_batch
+
+    rng = np.random.default_rng(21)
+    n_b, n_s, m_a, m_x = 5, 9, 6, 4
+    a = rng.standard_normal((n_b, n_s, m_a))
+    lam_a = -rng.uniform(0.1, 5.0, (n_b, m_a)) + 1j * rng.uniform(10.0, 100.0, (n_b, m_a))
+    x = rng.standard_normal((n_s, m_x)) + 1j * 0.2 * rng.standard_normal((n_s, m_x))
+    lam_x = -rng.uniform(0.1, 5.0, m_x) + 1j * rng.uniform(10.0, 100.0, m_x)
+    lam_a[0, 2] = 1j * lam_a[0, 2].imag  # undamped, and a reference pole equal to it
+    lam_x[1] = lam_a[0, 2]
+    lam_a[1, 3] = 1j * 55.0  # undamped against damped references: 0
+    a[2, :, 4] = x[:, 0].real  # the same shape and pole: 1
+    lam_a[2, 4] = lam_x[0]
+    if reference == "real":
+        x = x.real.copy()
+    elif reference == "one complex mode":
+        x, lam_x = x[:, 1:2], lam_x[1:2]
+    got = macxp_batch(a, lam_a, x, lam_x)
+    want = np.stack([macxp(a[k], lam_a[k], x, lam_x).T for k in range(n_b)])
+    np.testing.assert_allclose(got, want, rtol=1e-13, atol=1e-15)
+    if reference != "one complex mode":
+        assert got[1, :, 3].max() == 0.0
+        assert got[0, 1, 2] == pytest.approx(mac(a[0][:, [2]], x[:, [1]])[0, 0], rel=1e-13)
+    if reference == "real":
+        assert got[2, 0, 4] == pytest.approx(1.0, rel=1e-13)

@@ -252,23 +252,65 @@ def macxp_batch(
     """
     a = np.asarray(phi_a)
     x = np.asarray(phi_x)
+    if not np.iscomplexobj(a):
+        return _macxp_real_batch(a, np.asarray(lam_a), x, np.asarray(lam_x))
     at = np.swapaxes(a, -1, -2)
-    if np.iscomplexobj(a):
-        abs_t = np.abs(np.swapaxes(at @ x, -1, -2))  # (B, m_x, m_a)
-        abs_h = np.abs(np.swapaxes(at.conj() @ x, -1, -2))
-    elif np.iscomplexobj(x):
-        # real shapes against complex ones: a^H x = a^T x, from one real product with [Re x, Im x] (promoting
-        # the batch to complex would cost a copy and four times the flops)
-        m_x = x.shape[1]
-        both = np.swapaxes(at @ np.concatenate([x.real, x.imag], axis=1), -1, -2)  # (B, 2 m_x, m_a)
-        abs_t = abs_h = np.sqrt(np.square(both[:, :m_x]) + np.square(both[:, m_x:]))
-    else:
-        abs_t = abs_h = np.abs(np.swapaxes(at @ x, -1, -2))
+    abs_t = np.abs(np.swapaxes(at @ x, -1, -2))  # (B, m_x, m_a)
+    abs_h = np.abs(np.swapaxes(at.conj() @ x, -1, -2))
     s_a, pole_a, den_a, root_a = _column_terms(a, np.asarray(lam_a), None)  # (B, m_a)
     s_x, pole_x, den_x, root_x = _column_terms(x, np.asarray(lam_x), None)  # (m_x,)
     terms_a = (s_a[:, None, :], pole_a[:, None, :], den_a[:, None, :], root_a[:, None, :])
     terms_x = (s_x[:, None], pole_x[:, None], den_x[:, None], root_x[:, None])
     return _macxp_core(abs_h, abs_t, terms_a, terms_x)
+
+
+def _macxp_real_batch(a: NDArray[np.float64], lam_a: NDArray[Any], x: NDArray[Any],
+                      lam_x: NDArray[Any]) -> NDArray[np.float64]:
+    """:func:`macxp_batch` for real batch shapes (first-order modes: the GSA's and the subproblems' case).
+
+    With ``a`` real, ``|a^H x| = |a^T x|`` and MACXP is ``(w_h + w_t)^2 |a^T x|^2 / (den_a den_x)`` with the pole
+    weights ``w = min(1, 2 sqrt(s_a s_x) / |pole distance|)``. It is evaluated in squares,
+    ``(w_h + w_t)^2 = q_h + q_t + 2 sqrt(q_h q_t)`` with ``q = min(1, 4 s_a s_x / distance^2)`` (``min`` only
+    replaces the NaN of 0 / 0, coinciding undamped poles, by the limit 1: ``4 s_a s_x <= (s_a + s_x)^2 <=
+    distance^2``), so one square root per pair instead of three, and the cross products come out of one real
+    product ``[Re x, Im x]^T a`` laid out as the result: 20.4 -> 17.1 us per sample for the GSA's 20 x 45 pairs of 81
+    channels (chunks of 64, the allocator tuned as the executor does, a one-off timing; a third of it is that
+    product, at the machine's peak). Agrees with :func:`macxp` to rounding (tests).
+    """
+    m_x = x.shape[1]
+    xs = np.concatenate([x.real, x.imag], axis=1).T if np.iscomplexobj(x) else np.ascontiguousarray(x.T)
+    cross = xs @ a  # (B, m_x or 2 m_x, m_a)
+    out = np.square(cross[:, :m_x])
+    if np.iscomplexobj(x):
+        out += np.square(cross[:, m_x:])  # |a^T x|^2
+    s_a = np.abs(lam_a.real)  # (B, m_a)
+    den_a = np.einsum("...ij,...ij->...j", a, a)
+    den_a *= 1.0 + s_a / np.abs(lam_a)
+    s_x, _, den_x, _ = _column_terms(x, lam_x, None)  # (m_x,)
+    s_a3, s_x3 = s_a[:, None, :], s_x[:, None]
+    decay2 = s_a3 + s_x3
+    np.square(decay2, out=decay2)  # (B, m_x, m_a)
+    prod4 = s_a3 * (4.0 * s_x3)
+    im_a, im_x = lam_a.imag[:, None, :], lam_x.imag[:, None]
+    q_h = np.subtract(im_x, im_a)
+    np.square(q_h, out=q_h)
+    q_h += decay2
+    q_t = np.add(im_x, im_a)
+    np.square(q_t, out=q_t)
+    q_t += decay2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        np.divide(prod4, q_h, out=q_h)
+        np.divide(prod4, q_t, out=q_t)
+    np.fmin(q_h, 1.0, out=q_h)
+    np.fmin(q_t, 1.0, out=q_t)
+    both = np.multiply(q_h, q_t, out=decay2)
+    np.sqrt(both, out=both)
+    both *= 2.0
+    both += q_h
+    both += q_t  # (w_h + w_t)^2
+    out *= both
+    out /= den_a[:, None, :] * den_x[:, None]
+    return out
 
 
 def _column_terms(
