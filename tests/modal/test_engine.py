@@ -287,11 +287,10 @@ def test_samples_sharing_a_stiffness_share_one_eigen_solve_and_keep_their_bits(s
     # samples take one eigen-solve between them, and every result is what the sample alone gives
     model = NumericModel(slide)
     damping = [i for i, p in enumerate(slide.parameters) if p.kind in ("damping", "loss")]
-    stiffness = [i for i, p in enumerate(slide.parameters) if p.kind == "stiffness"]
-    assert damping and stiffness
+    masses = [i for i, p in enumerate(slide.parameters) if p.kind in ("mass", "inertia")]
+    assert damping
     base = random_params(model, 3, seed=11)
-    base[:, [i for i, p in enumerate(slide.parameters) if p.kind in ("mass", "inertia")]] = model.nominal[
-        [i for i, p in enumerate(slide.parameters) if p.kind in ("mass", "inertia")]]
+    base[:, masses] = model.nominal[masses]  # the nominal M: the shared-mass path, where solves are shared
     rows = []
     rng = np.random.default_rng(12)
     for b in base:  # each base sample, then copies with other damping
