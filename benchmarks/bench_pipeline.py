@@ -12,6 +12,12 @@ of the same algorithm could beat on this machine: two cores of the shared test m
 as fast as one, depending on the host's load; the best of three attempts is taken). Reported: wall time (model
 compilation included), time per stage, peak memory, ``wall_s / bound_s``, and ``ideal_ratio = wall_s /
 (eigen_serial_s / cores)`` against perfect scaling.
+
+The modal engine hands one eigen-solve to the samples of a chunk that share a stiffness (in the GSA, the Saltelli
+columns of the damping unknowns repeat their base sample's stiffness): the solves counted, and so the bound, are
+those actually made. For comparison with runs before that sharing, the samples the engine evaluated are counted too
+(``engine_samples``, ``shared_solves``) and the bound with one solve per sample is reported beside it
+(``bound_one_solve_per_sample_s``, ``ratio_one_solve_per_sample``).
 """
 
 from __future__ import annotations
