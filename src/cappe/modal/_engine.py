@@ -401,11 +401,10 @@ class ModalEngine:
         mats = model.matrices(pb, position) if exact else {}
         if shared.all():
             first, inverse = nominal.distinct_stiffness(pb)
-            if first.size == pb.shape[0]:
-                inverse = None
-            rows = pb if inverse is None else pb[first]
+            repeats = None if first.size == pb.shape[0] else inverse
+            rows = pb if repeats is None else pb[first]
             reduced = nominal.reduce(model.affine_terms(("K",), rows, position)["K"][0])
-            return mats, _Reductions(shared, nominal, None), reduced, inverse
+            return mats, _Reductions(shared, nominal, None), reduced, repeats
         reduced = np.empty((pb.shape[0], model.n_dof, model.n_dof))
         reduced[shared] = nominal.reduce(model.affine_terms(("K",), pb[shared], position)["K"][0])
         rest = np.flatnonzero(~shared)
