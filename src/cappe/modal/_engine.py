@@ -461,10 +461,20 @@ class ModalEngine:
             raise ModelError(msg)
         m_out = track.n_modes if track is not None else self.n_modes
         n_cand = min(n, m_out + TRACKING_MARGIN) if track is not None else m_out
-        phi = reduction.shapes(vec[:, :, :n_cand])  # (B, n, n_cand) mass-normalized (one per distinct stiffness)
+        vectors = vec[:, :, :n_cand]
         lam = lam[:, :n_cand]
-        b = phi.shape[0]
+        b = vectors.shape[0]
+        # the mass-normalized shapes L^-T v (one per distinct stiffness): with every sample on the nominal reduction
+        # and no tracking, kept in the (n, B m) layout that the sparse projections below take (phi (B, n, m) is
+        # formed from it only where asked for: the same bits, two layout copies fewer)
+        flat: Array | None = None
+        phi: Array | None = None
+        if track is None and isinstance(reduction, _Reductions) and reduction.other is None:
+            flat = reduction.nominal.flat_shapes(vectors)
+        else:
+            phi = reduction.shapes(vectors)
         if track is not None:
+            assert phi is not None  # tracking takes the (B, n, m) shapes
             index, mac = _track(track, phi)
             rows = np.arange(b)[:, None]
             phi = phi[rows[:, :, None], np.arange(n)[None, :, None], index[:, None, :]]
@@ -472,13 +482,22 @@ class ModalEngine:
         else:
             index = np.broadcast_to(np.arange(m_out), (b, m_out)).copy()
             mac = None
+        m = lam.shape[1]
+
+        def shapes_of(flat_shapes: Array | None, shapes: Array | None) -> Array:
+            if shapes is not None:
+                return shapes
+            assert flat_shapes is not None  # one of the two layouts is always at hand
+            return np.ascontiguousarray(flat_shapes.reshape(n, -1, m).transpose(1, 0, 2))
+
         sources = model.damping_sources(pb, position, jacobian=contributions)
         if repeats is not None and sources.rows.ndim == 3:  # elongation rows per sample: hand the modes out first
-            lam, index, phi = lam[repeats], index[repeats], phi[repeats]
+            lam, index, phi = lam[repeats], index[repeats], shapes_of(flat, phi)[repeats]
             mac = None if mac is None else mac[repeats]
-            repeats, b = None, pb.shape[0]
+            repeats, b, flat = None, pb.shape[0], None
         sensor_rows = self._sensor_rows(position)[1]
         if self._dof_channels or sources.rows.ndim == 3:
+            phi = shapes_of(flat, phi)
             elongation = sources.rows @ phi  # (B, n_src, m)
             shapes = phi.copy() if self._dof_channels else sensor_rows @ phi
         else:
@@ -486,22 +505,26 @@ class ModalEngine:
             # sparse product over every mode of the chunk (each entry a fixed-order sum, whatever the chunk) instead
             # of two dense batched products, 81 x 45 and 70 x 45 per mode on the machine tool
             stacked = self._stacked_rows(position, sensor_rows, sources.rows)
-            m = phi.shape[2]
-            flat = np.ascontiguousarray(phi.transpose(1, 0, 2)).reshape(n, b * m)
+            if flat is None:
+                assert phi is not None
+                flat = np.ascontiguousarray(phi.transpose(1, 0, 2)).reshape(n, b * m)
             proj = (stacked @ flat).reshape(-1, b, m)
             n_s = sensor_rows.shape[0]
             shapes = np.ascontiguousarray(proj[:n_s].transpose(1, 0, 2))
             # contiguous: the per-sample products of _first_order_damping must see the same layout whatever the
             # chunk size (BLAS sums a strided operand in another order)
             elongation = np.ascontiguousarray(proj[n_s:].transpose(1, 0, 2))
+        if full or exact:
+            phi = shapes_of(flat, phi)
         if repeats is not None:
             lam, index, shapes, elongation = lam[repeats], index[repeats], shapes[repeats], elongation[repeats]
             mac = None if mac is None else mac[repeats]
-            phi = phi[repeats] if full or exact else phi
+            phi = None if phi is None else phi[repeats]
         omega = np.sqrt(lam)
         zeta, contrib, gradient = _first_order_damping(sources, elongation, omega, contributions)
         poles = cshapes = None
         if exact:
+            assert phi is not None  # formed above for exact
             poles, psi = _exact_modes(mats, reduction.inverse_mass(), phi, omega)
             cshapes = psi if self._dof_channels else sensor_rows @ psi
         return _Chunk(omega / (2 * np.pi), zeta, shapes, index, mac, contrib, gradient, poles, cshapes,
@@ -627,8 +650,12 @@ class _NominalReduction:
         """The first sample of each distinct set of stiffness parameters (bit for bit) among ``params`` (B,
         n_params), and for every sample the position of its set in that list."""
         keys = np.ascontiguousarray(params[:, self._stiffness_columns])
+        b = params.shape[0]
         if keys.shape[1] == 0:  # K depends on no parameter: one stiffness for all
-            return np.zeros(1, dtype=np.intp), np.zeros(params.shape[0], dtype=np.intp)
+            return np.zeros(1, dtype=np.intp), np.zeros(b, dtype=np.intp)
+        if np.unique(keys.sum(axis=1)).size == b:  # equal rows have equal sums: all distinct (the usual case)
+            every = np.arange(b, dtype=np.intp)
+            return every, every
         rows = keys.view(np.dtype((np.void, keys.shape[1] * keys.itemsize))).ravel()
         _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
         return first.astype(np.intp), inverse.astype(np.intp).ravel()
@@ -664,8 +691,13 @@ class _NominalReduction:
         """``L^-T v`` (B, n, m), C-contiguous like :class:`_MassReduction`'s (consumers' BLAS products then sum in
         the same order whichever reduction a sample took)."""
         b, n, m = vectors.shape
+        return np.ascontiguousarray(self.flat_shapes(vectors).reshape(n, b, m).transpose(1, 0, 2))
+
+    def flat_shapes(self, vectors: Array) -> Array:
+        """``L^-T v`` laid out (n, B m): column ``k m + j`` is mode j of sample k."""
+        b, n, m = vectors.shape
         flat = np.ascontiguousarray(vectors.transpose(1, 0, 2)).reshape(n, b * m)
-        return np.ascontiguousarray(np.asarray(self._factored()[0] @ flat).reshape(n, b, m).transpose(1, 0, 2))
+        return np.asarray(self._factored()[0] @ flat)
 
     def inverse_mass(self) -> Array:
         return self._factored()[3]
