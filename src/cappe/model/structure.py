@@ -342,6 +342,7 @@ class StructureBuilder:
         self._sensors: list[Sensor] = []
         self._names: dict[str, dict[str, str]] = {}
         self._where_of: dict[tuple[str, str], str] = {}
+        self._points_cache: tuple[tuple[int, int], list[dict[sp.Symbol, sp.Float]]] | None = None
 
     # -- helpers ----------------------------------------------------------------------------------
     def _here(self, where: str | None, group: str, index: int) -> str:
@@ -386,10 +387,19 @@ class StructureBuilder:
         return vec  # type: ignore[return-value]
 
     def _evaluation_points(self) -> list[dict[sp.Symbol, sp.Float]]:
-        """Substitutions for validation: nominal parameters at every combination of listed axis positions."""
+        """Substitutions for validation: nominal parameters at every combination of listed axis positions.
+
+        Made once per set of parameters and axes (they are only ever appended; every element's vectors are
+        checked against them, which rebuilt them a few hundred times per model)."""
+        key = (len(self._parameters), len(self._axes))
+        cached = self._points_cache
+        if cached is not None and cached[0] == key:
+            return cached[1]
         params = {symbol(p.name): sp.Float(p.value) for p in self._parameters}
         grids = [[(symbol(a.name), sp.Float(v)) for v in (a.positions or (0.0,))] for a in self._axes]
-        return [{**params, **dict(combo)} for combo in itertools.product(*grids)]
+        points = [{**params, **dict(combo)} for combo in itertools.product(*grids)]
+        self._points_cache = (key, points)
+        return points
 
     def _nominal_value(self, expr: sp.Expr) -> float | None:
         """Smallest value of ``expr`` over :meth:`_evaluation_points`; None if it is not a real number."""
