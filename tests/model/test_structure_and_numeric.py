@@ -274,6 +274,15 @@ def test_coefficients_in_product_form_and_generated_code_agree_with_sympy():
     assert got.flags.c_contiguous
     for k in range(5):  # one sample at a time: the same bits
         np.testing.assert_array_equal(evaluator(pb[k:k + 1], (0.25,)), got[k:k + 1])
+    # partial derivatives: product forms by rule, the others by sympy; every structurally non-zero one listed
+    symbols = [a, b, c]
+    want_entries = {(j, i) for j, e in enumerate(expressions) for i, sym in enumerate(symbols) if sp.diff(e, sym) != 0}
+    assert set(evaluator.entries) == want_entries
+    derivatives = evaluator.jacobian(pb, (0.25,))
+    for k, (j, i) in enumerate(evaluator.entries):
+        d = sp.diff(expressions[j], symbols[i])
+        np.testing.assert_allclose(derivatives[:, k], [float(d.subs({a: r[0], b: r[1], c: r[2], z: 0.25})) for r in pb],
+                                   rtol=1e-14, err_msg=f"d expression {j} / d {symbols[i]}")
     only_fast = _Coefficients(expressions[:4], [a, b, c], [z])
     assert only_fast(pb, (0.25,)).flags.c_contiguous
     np.testing.assert_allclose(only_fast(pb, (-1.0,))[:, 2], pb[:, 0] * pb[:, 1] * (4 / 3), rtol=1e-15)

@@ -131,6 +131,39 @@ class _Coefficients:
         self._factor_cache: dict[tuple[float, ...], Array] = {}
         all_symbols = list(parameters) + list(axes)
         self._slow_func = sp.lambdify(all_symbols, [expressions[j] for j in slow], modules="numpy", cse=True)
+        # partial derivatives: d(p_a p_b g)/dp_a = p_b g (no symbolic differentiation); the others by sympy
+        entries: list[tuple[int, int]] = []
+        other: list[int] = []
+        factor_of: list[int] = []
+        for f, (j, (a, b)) in enumerate(zip(fast, pairs, strict=True)):
+            for this, that in ((a, b), (b, a)):
+                if this != ones:
+                    entries.append((j, this))
+                    other.append(that)
+                    factor_of.append(f)
+        self._n_fast_entries = len(entries)
+        self._jac_other = np.array(other, dtype=np.intp)
+        self._jac_factor = np.array(factor_of, dtype=np.intp)
+        slow_entries, derivatives = _jacobian([expressions[j] for j in slow], parameters)
+        entries.extend((slow[k], i) for k, i in slow_entries)
+        #: the structurally non-zero partial derivatives, (expression, parameter) index pairs
+        self.entries = entries
+        self._slow_jac_func = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
+
+    def jacobian(self, pb: Array, pos: tuple[float, ...]) -> Array:
+        """The partial derivatives listed in :attr:`entries`, (B, n_entries), for a batch at one position."""
+        b = pb.shape[0]
+        out = np.empty((b, len(self.entries)))
+        if self._n_fast_entries:
+            ext = np.empty((b, pb.shape[1] + 1))
+            ext[:, :-1] = pb
+            ext[:, -1] = 1.0
+            out[:, :self._n_fast_entries] = np.take(ext, self._jac_other, axis=1) * self._factors(pos)[self._jac_factor]
+        if len(self.entries) > self._n_fast_entries:
+            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(b, v) for v in pos]
+            for k, v in enumerate(self._slow_jac_func(*args)):
+                out[:, self._n_fast_entries + k] = v
+        return out
 
     def _factors(self, pos: tuple[float, ...]) -> Array:
         cached = self._factor_cache.get(pos)
@@ -254,8 +287,7 @@ class NumericModel:
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
-        self._jacobian_entries, derivatives = _jacobian(coefficients, self._param_symbols)
-        self._jacobian_func = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
+        self._jacobian_entries = self._coefficients.entries
         self._residual_derivative_funcs = {
             name: sp.lambdify(
                 all_symbols, [plan.residual.diff(sym) for sym in self._param_symbols], modules="numpy", cse=True
@@ -299,8 +331,7 @@ class NumericModel:
         self._source_rows = sp.lambdify(all_symbols, entries, modules="numpy", cse=True)
         axis_set = set(self._axis_symbols)
         self._source_rows_per_sample = any(not sp.sympify(v).free_symbols <= axis_set for v in entries)
-        self._source_jac_entries, derivatives = _jacobian(coefficients, self._param_symbols)
-        self._source_jac = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
+        self._source_jac_entries = np.array(self._source_coef.entries, dtype=np.intp).reshape(-1, 2)
 
     def damping_sources(
         self, params: ParamsLike = None, position: Mapping[str, float] | None = None, *, jacobian: bool = True
@@ -323,10 +354,8 @@ class NumericModel:
         n_b, n_s, n = pb.shape[0], len(self.source_names), self.n_dof
         coef = self._source_coef(pb, pos)
         jac = np.zeros((n_b, n_s, pb.shape[1])) if jacobian else None
-        if jac is not None and self._source_jac_entries:
-            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(n_b, v) for v in pos]
-            for (j, i), v in zip(self._source_jac_entries, self._source_jac(*args), strict=True):
-                jac[:, j, i] = v
+        if jac is not None and self._source_jac_entries.size:
+            jac[:, self._source_jac_entries[:, 0], self._source_jac_entries[:, 1]] = self._source_coef.jacobian(pb, pos)
         rows: Array
         if self._source_rows_per_sample:
             rows = np.empty((n_b, n_s, n))
@@ -566,9 +595,8 @@ class NumericModel:
             sel = np.array([self.parameter_names.index(name) for name in parameters], dtype=np.intp)
         jac = np.zeros((self._n_coef, n_p))
         if self._jacobian_entries:
-            values = self._jacobian_func(*p, *pos)
-            for (j, i), v in zip(self._jacobian_entries, values, strict=True):
-                jac[j, i] = float(v)
+            where = np.array(self._jacobian_entries, dtype=np.intp)
+            jac[where[:, 0], where[:, 1]] = self._coefficients.jacobian(p[None, :], pos)[0]
         jac = jac[:, sel]
         patterns = self._patterns(pos)
         out: dict[str, Array] = {}
