@@ -626,8 +626,9 @@ class _NominalReduction:
     ``L^-1`` is formed once, and so are the reduced stiffness patterns ``L^-1 P_j L^-T``: a sample's reduced
     stiffness is then the sparse sum ``sum_j f_j(p) L^-1 P_j L^-T`` of its coefficients, with no assembly of M and
     K, no factorization and no dense products per sample: measured 61 -> 21 us per sample on the 45-DOF machine
-    tool (chunks of 64, a one-off timing), and the engine at 0.87-0.90 of the bare eigh bound with known masses
-    against 0.77-0.83 with varying ones (benchmarks/bench_modal.py, n_dof 30-150). The factor is formed on first
+    tool (chunks of 64, a one-off timing), and the engine at 0.84-0.93 of the bare eigh bound with known masses
+    against 0.73-0.84 with varying ones (benchmarks/bench_modal.py, n_dof 30-150; the shared host's load moves
+    these by a few hundredths from run to run). The factor is formed on first
     use, so a model whose nominal M is not positive definite fails only when a sample has that M.
     """
 
