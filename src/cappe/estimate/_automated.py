@@ -1219,7 +1219,7 @@ class ExactModalProblem:
             self.divisors.append(div)
         self.evaluations = 0
         self._count_lock = threading.Lock()
-        self._cache: dict[bytes, tuple[Array, list[NDArray[np.intp]]]] = {}
+        self._cache: dict[bytes, tuple[Array, list[NDArray[np.intp]], list[CArray]]] = {}
 
     def _modes(self, params: Array, k: int) -> tuple[CArray, CArray]:
         batch = self.engine.evaluate(params, self.positions[k], exact=True)
@@ -1252,20 +1252,23 @@ class ExactModalProblem:
             parts.extend([e.real.reshape(e.shape[0], -1), e.imag.reshape(e.shape[0], -1)])
         return np.concatenate(parts, axis=1)
 
-    def _evaluate(self, p: Array) -> tuple[Array, list[NDArray[np.intp]]]:
+    def _evaluate(self, p: Array) -> tuple[Array, list[NDArray[np.intp]], list[CArray]]:
+        """Residuals at ``p``, and per set the pairing and the paired model poles (kept for the Jacobian at the
+        same point, which needs them and would otherwise solve the same eigenproblem again)."""
         key = np.asarray(p, dtype=float).tobytes()
         hit = self._cache.get(key)
         if hit is not None:
             return hit
         full = self.space.full(p)[None, :]
 
-        def one_set(k: int) -> tuple[Array, NDArray[np.intp]]:
+        def one_set(k: int) -> tuple[Array, NDArray[np.intp], CArray]:
             poles, shapes = self._modes(full, k)
             index, _ = _pair(shapes[0], poles[0], self.reference.sets[k])
-            return self._residual(poles, shapes, k, index)[0], index
+            return self._residual(poles, shapes, k, index)[0], index, poles[0][index]
 
         parts = self._runner.map(one_set, range(len(self.reference.sets)))
-        out = (np.concatenate([r for r, _ in parts]), [index for _, index in parts])
+        out = (np.concatenate([r for r, _, _ in parts]), [index for _, index, _ in parts],
+               [paired for _, _, paired in parts])
         self._cache = {key: out}
         return out
 
@@ -1282,13 +1285,12 @@ class ExactModalProblem:
         matrix derivatives of the model. One eigen-decomposition per set instead of one per unknown.
         """
         p = np.asarray(p, dtype=float)
-        _, pairs = self._evaluate(p)
+        _, _, paired = self._evaluate(p)
         full = self.space.full(p[None, :])[0]
         columns = [self.model.parameter_names.index(n) for n in self.space.names]
 
         def one_set(k: int) -> Array:
-            poles, _ = self._modes(full[None, :], k)
-            return self._set_jacobian(full, k, poles[0][pairs[k]], columns, self.reference.sets[k])
+            return self._set_jacobian(full, k, paired[k], columns, self.reference.sets[k])
 
         return np.concatenate(self._runner.map(one_set, range(len(self.reference.sets))), axis=0)
 
@@ -1362,7 +1364,7 @@ class ExactModalProblem:
 
     def pairing_report(self, p: Array) -> list[dict[str, Any]]:
         """Per set: the model mode paired with each reference mode at ``p``."""
-        _, pairs = self._evaluate(np.asarray(p, dtype=float))
+        _, pairs, _ = self._evaluate(np.asarray(p, dtype=float))
         return [{"position": dict(s.position), "model_mode": idx.tolist()}
                 for s, idx in zip(self.reference.sets, pairs, strict=True)]
 
