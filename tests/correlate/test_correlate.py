@@ -581,3 +581,14 @@ def test_macxp_batch_of_real_shapes_matches_macxp_including_undamped_limits(refe
         assert got[0, 1, 2] == pytest.approx(mac(a[0][:, [2]], x[:, [1]])[0, 0], rel=1e-13)
     if reference == "real":
         assert got[2, 0, 4] == pytest.approx(1.0, rel=1e-13)
+
+
+def test_macxp_batch_takes_integer_shapes():
+    from cappe.correlate import macxp_batch
+
+    rng = np.random.default_rng(4)
+    shapes = rng.integers(-3, 4, (2, 4, 3))
+    lam_a = -rng.uniform(0.1, 1.0, (2, 3)) + 1j * rng.uniform(10.0, 20.0, (2, 3))
+    x = rng.standard_normal((4, 2)) + 0.1j
+    lam_x = -rng.uniform(0.1, 1.0, 2) + 1j * rng.uniform(10.0, 20.0, 2)
+    np.testing.assert_allclose(macxp_batch(shapes, lam_a, x, lam_x), macxp_batch(shapes.astype(float), lam_a, x, lam_x))

@@ -286,3 +286,21 @@ def test_coefficients_in_product_form_and_generated_code_agree_with_sympy():
     only_fast = _Coefficients(expressions[:4], [a, b, c], [z])
     assert only_fast(pb, (0.25,)).flags.c_contiguous
     np.testing.assert_allclose(only_fast(pb, (-1.0,))[:, 2], pb[:, 0] * pb[:, 1] * (4 / 3), rtol=1e-15)
+
+
+def test_a_position_factor_undefined_at_a_position_gives_inf_or_nan_as_numpy_does():
+    # product-form coefficients compute their axis factor once per position: with numpy's rules (inf, NaN and a
+    # RuntimeWarning), not Python's (ZeroDivisionError, complex results), like the generated code for arrays
+    b = StructureBuilder("undefined-factor")
+    b.parameter("m", 1.0, kind="mass")
+    b.parameter("k", 1.0e4, kind="stiffness")
+    b.axis("z", [0.1, 0.4])
+    b.body("a", mass="m", dofs=("x",))
+    b.element("e1", bodies=("ground", "a"), at=[0, 0, 0], stiffness={"x": "k/(z + 2)"})
+    b.element("e2", bodies=("ground", "a"), at=[0, 0, 0], stiffness={"x": "k*(z + 3)**(1/3)"})
+    nm = NumericModel(b.build())
+    np.testing.assert_allclose(nm.matrices(None, {"z": 0.0})["K"], [[1.0e4 / 2 + 1.0e4 * 3 ** (1 / 3)]], rtol=1e-14)
+    with pytest.warns(RuntimeWarning):
+        assert np.isinf(nm.matrices(None, {"z": -2.0})["K"][0, 0])
+    with pytest.warns(RuntimeWarning):
+        assert np.isnan(nm.matrices(None, {"z": -4.0})["K"][0, 0])

@@ -112,6 +112,16 @@ def test_malformed_yaml_reports_line():
         load(broken)
 
 
+@pytest.mark.parametrize(("text", "match"), [
+    ("format: cappe.model/1\n\tname: x\n", r"at line 2, column 1: found character '\\t' that cannot start any token"),
+    ("format: cappe.model/1\nname: *nowhere\n", r"at line 2, column 7: found undefined alias 'nowhere'"),
+])
+def test_malformed_yaml_names_the_offending_character_or_alias(text, match):
+    # the fast (libyaml) parser only says what kind of thing went wrong; the message comes from the detailed one
+    with pytest.raises(ModelError, match=match):
+        structure_from_yaml(text, "model.yaml")
+
+
 def test_unknown_name_in_expression_string():
     with pytest.raises(ModelError, match=r"unknown name 'q'"):
         load(BASE.replace("mass: m,", "mass: m*q,"))

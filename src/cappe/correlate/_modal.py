@@ -277,8 +277,9 @@ def _macxp_real_batch(a: NDArray[np.float64], lam_a: NDArray[Any], x: NDArray[An
     channels (chunks of 64, the allocator tuned as the executor does, a one-off timing; a third of it is that
     product, at the machine's peak). Agrees with :func:`macxp` to rounding (tests).
     """
+    a = np.asarray(a, dtype=float)  # integer shapes too (the squares below are computed in place)
     m_x = x.shape[1]
-    xs = np.concatenate([x.real, x.imag], axis=1).T if np.iscomplexobj(x) else np.ascontiguousarray(x.T)
+    xs = np.concatenate([x.real, x.imag], axis=1).T if np.iscomplexobj(x) else np.ascontiguousarray(x.T, dtype=float)
     cross = xs @ a  # (B, m_x or 2 m_x, m_a)
     out = np.square(cross[:, :m_x])
     if np.iscomplexobj(x):

@@ -960,7 +960,8 @@ class AutomatedIdentification(Estimator):
                         candidates, done=lambda _: refine_bar.update(1))
                 finally:
                     refine_bar.close()
-            caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
+            # sorted: the starts' threads interleave their warnings in any order
+            caught.extend(sorted(f"{w.category.__name__}: {w.message}" for w in record))
             for (label, _), (found, info) in zip(candidates, refined, strict=True):
                 runs.append({"start": label, "cost_before": info["cost_before"], "cost_after": info["cost_after"]})
                 if best is None or info["cost_after"] < best[1]["cost_after"] * (1 - 1e-9):

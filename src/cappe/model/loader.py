@@ -80,16 +80,25 @@ def structure_from_yaml(text: str, label: str = "<string>") -> Structure:
     """Parse YAML model text; ``label`` names the file in error messages."""
     try:
         data = yaml.load(text, Loader=_SAFE_LOADER)
+    except yaml.YAMLError:
+        data = _parse_for_message(text, label)
+    if not isinstance(data, Mapping):
+        msg = f"model file {label} must contain a mapping at the top level; got {type(data).__name__}"
+        raise ModelError(msg)
+    return structure_from_mapping(data, label)
+
+
+def _parse_for_message(text: str, label: str) -> Any:
+    """Parse with PyYAML's pure-Python loader, whose errors name the offending character or alias (libyaml's
+    only say what kind of thing went wrong); raise its error, with line and column, as a ModelError."""
+    try:
+        return yaml.safe_load(text)
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "unknown line"
         problem = getattr(exc, "problem", None) or str(exc)
         msg = f"malformed YAML in {label} at {line}: {problem}"
         raise ModelError(msg) from exc
-    if not isinstance(data, Mapping):
-        msg = f"model file {label} must contain a mapping at the top level; got {type(data).__name__}"
-        raise ModelError(msg)
-    return structure_from_mapping(data, label)
 
 
 def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") -> Structure:

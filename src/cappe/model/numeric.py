@@ -168,7 +168,9 @@ class _Coefficients:
     def _factors(self, pos: tuple[float, ...]) -> Array:
         cached = self._factor_cache.get(pos)
         if cached is None:
-            cached = np.array([float(v) for v in self._factor_func(*pos)], dtype=float)
+            # numpy scalars: a factor undefined at this position gives inf or NaN (and numpy's warning) as the
+            # generated code does for arrays; Python floats would raise ZeroDivisionError or turn complex
+            cached = np.array(list(self._factor_func(*(np.float64(v) for v in pos))), dtype=float)
             cached.setflags(write=False)
             self._factor_cache[pos] = cached
         return cached
