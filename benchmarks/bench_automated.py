@@ -11,7 +11,7 @@ with z1 = -0.294 m held out for validation, at the settings of ``make demo`` (N 
 - noisy: noise 0.5 % on frequencies, 5 % on damping ratios, 2 % on shape components; the final refinement weights
   residuals by that noise. Pass: the 95 % intervals cover the truth for >= 90 % of the parameters over the seeds.
 
-``python -m benchmarks.bench_automated [RUNS]`` (default 5 runs per case; about 70 s per run on two cores).
+``python -m benchmarks.bench_automated [RUNS]`` (default 5 runs per case; about 6 s per run on two cores).
 """
 
 from __future__ import annotations
