@@ -519,7 +519,7 @@ class ModalEngine:
         if repeats is not None:
             lam, index, shapes, elongation = lam[repeats], index[repeats], shapes[repeats], elongation[repeats]
             mac = None if mac is None else mac[repeats]
-            phi = None if phi is None else phi[repeats]
+            phi = phi[repeats] if phi is not None and (full or exact) else phi
         omega = np.sqrt(lam)
         zeta, contrib, gradient = _first_order_damping(sources, elongation, omega, contributions)
         poles = cshapes = None
