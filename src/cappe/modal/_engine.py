@@ -488,7 +488,7 @@ class ModalEngine:
             if shapes is not None:
                 return shapes
             assert flat_shapes is not None  # one of the two layouts is always at hand
-            return np.ascontiguousarray(flat_shapes.reshape(n, -1, m).transpose(1, 0, 2))
+            return _unflatten(flat_shapes, m)
 
         sources = model.damping_sources(pb, position, jacobian=contributions)
         if repeats is not None and sources.rows.ndim == 3:  # elongation rows per sample: hand the modes out first
@@ -507,13 +507,12 @@ class ModalEngine:
             stacked = self._stacked_rows(position, sensor_rows, sources.rows)
             if flat is None:
                 assert phi is not None
-                flat = np.ascontiguousarray(phi.transpose(1, 0, 2)).reshape(n, b * m)
-            proj = (stacked @ flat).reshape(-1, b, m)
+                flat = _flatten(phi)
+            proj = np.asarray(stacked @ flat)
             n_s = sensor_rows.shape[0]
-            shapes = np.ascontiguousarray(proj[:n_s].transpose(1, 0, 2))
-            # contiguous: the per-sample products of _first_order_damping must see the same layout whatever the
-            # chunk size (BLAS sums a strided operand in another order)
-            elongation = np.ascontiguousarray(proj[n_s:].transpose(1, 0, 2))
+            # contiguous (B, rows, m): the per-sample products of _first_order_damping must see the same layout
+            # whatever the chunk size (BLAS sums a strided operand in another order)
+            shapes, elongation = _unflatten(proj[:n_s], m), _unflatten(proj[n_s:], m)
         if full or exact:
             phi = shapes_of(flat, phi)
         if repeats is not None:
@@ -556,6 +555,18 @@ def modal_batch(
 
 
 # -- numerical kernels ------------------------------------------------------------------------------
+def _flatten(shapes: Array) -> Array:
+    """Shapes (B, n, m) laid out (n, B m), column ``k m + j`` holding mode j of sample k: one sparse product then
+    maps the shapes of the whole chunk."""
+    b, n, m = shapes.shape
+    return np.ascontiguousarray(shapes.transpose(1, 0, 2)).reshape(n, b * m)
+
+
+def _unflatten(flat: Array, m: int) -> Array:
+    """The inverse layout of :func:`_flatten`: (rows, B m) -> C-contiguous (B, rows, m)."""
+    return np.ascontiguousarray(flat.reshape(flat.shape[0], -1, m).transpose(1, 0, 2))
+
+
 def _first(indices: NDArray[np.intp], k: int = 5) -> str:
     shown = ", ".join(str(int(i)) for i in indices[:k])
     return f"[{shown}{', ...' if indices.size > k else ''}] ({indices.size} in all)"
@@ -691,14 +702,11 @@ class _NominalReduction:
     def shapes(self, vectors: Array) -> Array:
         """``L^-T v`` (B, n, m), C-contiguous like :class:`_MassReduction`'s (consumers' BLAS products then sum in
         the same order whichever reduction a sample took)."""
-        b, n, m = vectors.shape
-        return np.ascontiguousarray(self.flat_shapes(vectors).reshape(n, b, m).transpose(1, 0, 2))
+        return _unflatten(self.flat_shapes(vectors), vectors.shape[2])
 
     def flat_shapes(self, vectors: Array) -> Array:
-        """``L^-T v`` laid out (n, B m): column ``k m + j`` is mode j of sample k."""
-        b, n, m = vectors.shape
-        flat = np.ascontiguousarray(vectors.transpose(1, 0, 2)).reshape(n, b * m)
-        return np.asarray(self._factored()[0] @ flat)
+        """``L^-T v`` laid out as :func:`_flatten` lays out ``v``."""
+        return np.asarray(self._factored()[0] @ _flatten(vectors))
 
     def inverse_mass(self) -> Array:
         return self._factored()[3]
