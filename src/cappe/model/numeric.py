@@ -152,17 +152,13 @@ class _Coefficients:
 
     def jacobian(self, pb: Array, pos: tuple[float, ...]) -> Array:
         """The partial derivatives listed in :attr:`entries`, (B, n_entries), for a batch at one position."""
-        b = pb.shape[0]
-        out = np.empty((b, len(self.entries)))
-        if self._n_fast_entries:
-            ext = np.empty((b, pb.shape[1] + 1))
-            ext[:, :-1] = pb
-            ext[:, -1] = 1.0
-            out[:, :self._n_fast_entries] = np.take(ext, self._jac_other, axis=1) * self._factors(pos)[self._jac_factor]
-        if len(self.entries) > self._n_fast_entries:
-            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(b, v) for v in pos]
-            for k, v in enumerate(self._slow_jac_func(*args)):
-                out[:, self._n_fast_entries + k] = v
+        out = np.empty((pb.shape[0], len(self.entries)))
+        fast = self._n_fast_entries
+        if fast:
+            out[:, :fast] = np.take(_with_ones(pb), self._jac_other, axis=1) * self._factors(pos)[self._jac_factor]
+        if len(self.entries) > fast:
+            for k, v in enumerate(self._slow_jac_func(*_arguments(pb, pos))):
+                out[:, fast + k] = v
         return out
 
     def _factors(self, pos: tuple[float, ...]) -> Array:
@@ -177,11 +173,8 @@ class _Coefficients:
 
     def __call__(self, pb: Array, pos: tuple[float, ...]) -> Array:
         """The coefficients (B, n) for a batch of parameter vectors (B, n_params) at one position."""
-        b = pb.shape[0]
         if self._fast.size:
-            ext = np.empty((b, pb.shape[1] + 1))
-            ext[:, :-1] = pb
-            ext[:, -1] = 1.0
+            ext = _with_ones(pb)
             # np.take lays the result out C-contiguous (ext[:, index] is column-major): consumers' BLAS products
             # then sum in the same order whatever the batch size
             values = np.take(ext, self._first, axis=1)
@@ -189,14 +182,26 @@ class _Coefficients:
             values *= self._factors(pos)
             if not self._slow.size:  # every coefficient in product form (the usual case): in order already
                 return values
-        out = np.empty((b, self.size))
+        out = np.empty((pb.shape[0], self.size))
         if self._fast.size:
             out[:, self._fast] = values
         if self._slow.size:
-            args = [pb[:, i] for i in range(pb.shape[1])] + [np.full(b, v) for v in pos]
-            for j, v in zip(self._slow, self._slow_func(*args), strict=True):
+            for j, v in zip(self._slow, self._slow_func(*_arguments(pb, pos)), strict=True):
                 out[:, j] = v
         return out
+
+
+def _with_ones(pb: Array) -> Array:
+    """The batch (B, n_params) with a column of ones appended: the factor a single-parameter product lacks."""
+    ext = np.empty((pb.shape[0], pb.shape[1] + 1))
+    ext[:, :-1] = pb
+    ext[:, -1] = 1.0
+    return ext
+
+
+def _arguments(pb: Array, pos: tuple[float, ...]) -> list[Array]:
+    """The arguments of generated code: one array per parameter, then one per axis (the position repeated)."""
+    return [pb[:, i] for i in range(pb.shape[1])] + [np.full(pb.shape[0], v) for v in pos]
 
 
 def _product_form(expr: sp.Expr, index: Mapping[sp.Symbol, int],
@@ -289,7 +294,7 @@ class NumericModel:
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
-        self._jacobian_entries = self._coefficients.entries
+        self._jacobian_entries = np.array(self._coefficients.entries, dtype=np.intp).reshape(-1, 2)
         self._residual_derivative_funcs = {
             name: sp.lambdify(
                 all_symbols, [plan.residual.diff(sym) for sym in self._param_symbols], modules="numpy", cse=True
@@ -357,7 +362,8 @@ class NumericModel:
         coef = self._source_coef(pb, pos)
         jac = np.zeros((n_b, n_s, pb.shape[1])) if jacobian else None
         if jac is not None and self._source_jac_entries.size:
-            jac[:, self._source_jac_entries[:, 0], self._source_jac_entries[:, 1]] = self._source_coef.jacobian(pb, pos)
+            source, parameter = self._source_jac_entries.T
+            jac[:, source, parameter] = self._source_coef.jacobian(pb, pos)
         rows: Array
         if self._source_rows_per_sample:
             rows = np.empty((n_b, n_s, n))
@@ -482,7 +488,8 @@ class NumericModel:
             msg = f"matrix must be one of {MATRIX_NAMES}; got {name!r}"
             raise ModelError(msg)
         rows = self._slices[name]
-        used = {i for j, i in self._jacobian_entries if rows.start <= j < rows.stop}
+        j, i = self._jacobian_entries.T
+        used = set(i[(j >= rows.start) & (j < rows.stop)].tolist())
         plan = self._plans[name]
         if plan.residual is not None:
             used |= {i for i, sym in enumerate(self._param_symbols) if sym in plan.residual.free_symbols}
@@ -517,16 +524,13 @@ class NumericModel:
         pb = p if p.ndim == 2 else p[None, :]
         pos = self.position_vector(position)
         n = self.n_dof
-        coef = self._coefficient_values(pb, pos)
+        coef = self._coefficients(pb, pos)
         out: dict[str, tuple[Array, Array]] = {}
         for name in names:
             patterns = self._patterns(pos)[name].reshape(-1, n, n)
             patterns.setflags(write=False)
             out[name] = (coef[:, self._slices[name]], patterns)
         return out
-
-    def _coefficient_values(self, pb: Array, pos: tuple[float, ...]) -> Array:
-        return self._coefficients(pb, pos)
 
     # -- evaluation -------------------------------------------------------------------------------
     def matrices(
@@ -541,7 +545,7 @@ class NumericModel:
         pb = p if batch else p[None, :]
         pos = self.position_vector(position)
         n = self.n_dof
-        coef = self._coefficient_values(pb, pos)
+        coef = self._coefficients(pb, pos)
         sparse = self._sparse_patterns(pos)
         out: dict[str, Array] = {}
         for name in names:
@@ -596,9 +600,9 @@ class NumericModel:
                 raise ModelError(msg)
             sel = np.array([self.parameter_names.index(name) for name in parameters], dtype=np.intp)
         jac = np.zeros((self._n_coef, n_p))
-        if self._jacobian_entries:
-            where = np.array(self._jacobian_entries, dtype=np.intp)
-            jac[where[:, 0], where[:, 1]] = self._coefficients.jacobian(p[None, :], pos)[0]
+        if self._jacobian_entries.size:
+            coefficient, parameter = self._jacobian_entries.T
+            jac[coefficient, parameter] = self._coefficients.jacobian(p[None, :], pos)[0]
         jac = jac[:, sel]
         patterns = self._patterns(pos)
         out: dict[str, Array] = {}
