@@ -284,9 +284,7 @@ def _macxp_real_batch(a: NDArray[np.float64], lam_a: NDArray[Any], x: NDArray[An
     out = np.square(cross[:, :m_x])
     if np.iscomplexobj(x):
         out += np.square(cross[:, m_x:])  # |a^T x|^2
-    s_a = np.abs(lam_a.real)  # (B, m_a)
-    den_a = np.einsum("...ij,...ij->...j", a, a)
-    den_a *= 1.0 + s_a / np.abs(lam_a)
+    s_a, _, den_a, _ = _column_terms(a, lam_a, None)  # (B, m_a)
     s_x, _, den_x, _ = _column_terms(x, lam_x, None)  # (m_x,)
     s_a3, s_x3 = s_a[:, None, :], s_x[:, None]
     decay2 = s_a3 + s_x3
