@@ -526,3 +526,23 @@ def test_exact_problem_jacobian_matches_finite_differences(bench, noise):
         fd[:, i] = (problem.residuals(up) - problem.residuals(down)) / (2 * h)
     scale = np.abs(fd).max(axis=0)
     np.testing.assert_allclose(jac, fd, rtol=1e-4, atol=1e-6 * scale.max())
+
+
+def test_warnings_raised_on_executor_threads_reach_the_diagnostics_in_a_fixed_order():
+    # the stiffness refinement's starts run on threads: their warnings must be recorded (catch_warnings around
+    # the whole map) and listed in an order that does not depend on the threads' scheduling
+    import warnings
+    from concurrent.futures import ThreadPoolExecutor
+
+    from cappe.estimate._automated import _recorded_warnings
+
+    caught: list[str] = []
+    with _recorded_warnings(caught, sort=True), ThreadPoolExecutor(2) as pool:
+        list(pool.map(lambda k: warnings.warn(f"start {k} did not converge", RuntimeWarning, stacklevel=1),
+                      [3, 1, 2]))
+    assert caught == [f"RuntimeWarning: start {k} did not converge" for k in (1, 2, 3)]
+    in_order: list[str] = []
+    with _recorded_warnings(in_order):
+        warnings.warn("b", UserWarning, stacklevel=1)
+        warnings.warn("a", UserWarning, stacklevel=1)
+    assert in_order == ["UserWarning: b", "UserWarning: a"]

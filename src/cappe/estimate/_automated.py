@@ -49,11 +49,12 @@ The pipeline (paper Fig. 1), for reference modes at several axis positions, one 
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import threading
 import time
 import warnings
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
@@ -952,16 +953,13 @@ class AutomatedIdentification(Estimator):
             local = runner if runner.kind == "threads" else Executor("serial")
             refine_bar: Any = tqdm(total=len(candidates), desc="stiffness refinement", unit="start",
                                    disable=not self.progress)
-            with warnings.catch_warnings(record=True) as record:
-                warnings.simplefilter("always")
+            with _recorded_warnings(caught, sort=True):  # the starts' threads interleave their warnings
                 try:
                     refined = local.map(
                         lambda c: self._refine(model, space, ident_ref, c[1], modal_names, (w_f, 0.0, w_s)),
                         candidates, done=lambda _: refine_bar.update(1))
                 finally:
                     refine_bar.close()
-            # sorted: the starts' threads interleave their warnings in any order
-            caught.extend(sorted(f"{w.category.__name__}: {w.message}" for w in record))
             for (label, _), (found, info) in zip(candidates, refined, strict=True):
                 runs.append({"start": label, "cost_before": info["cost_before"], "cost_after": info["cost_after"]})
                 if best is None or info["cost_after"] < best[1]["cost_after"] * (1 - 1e-9):
@@ -998,11 +996,9 @@ class AutomatedIdentification(Estimator):
         if self.exact:
             final, joint = self._refine_exact(model, space, ident_ref, current, (w_f, w_z, w_s), runner)
         else:
-            with warnings.catch_warnings(record=True) as record:
-                warnings.simplefilter("always")
+            with _recorded_warnings(caught):
                 final, joint = self._refine(model, space, ident_ref, current, list(space.names), (w_f, w_z, w_s),
                                             keep=True)
-            caught.extend(f"{w.category.__name__}: {w.message}" for w in record)
         timings["joint_refinement"] = time.perf_counter() - t
         estimate: ParameterEstimate = joint.pop("estimate")
 
@@ -1368,6 +1364,18 @@ class ExactModalProblem:
         _, pairs, _ = self._evaluate(np.asarray(p, dtype=float))
         return [{"position": dict(s.position), "model_mode": idx.tolist()}
                 for s, idx in zip(self.reference.sets, pairs, strict=True)]
+
+
+@contextlib.contextmanager
+def _recorded_warnings(caught: list[str], *, sort: bool = False) -> Iterator[None]:
+    """Append the warnings raised inside the block to ``caught`` as ``"Category: message"``, from any thread
+    (``catch_warnings`` is process-wide state, so it wraps a whole parallel map, not each task); ``sort`` where
+    threads interleave them, so that the diagnostics do not depend on the scheduling."""
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        yield
+    lines = [f"{w.category.__name__}: {w.message}" for w in record]
+    caught.extend(sorted(lines) if sort else lines)
 
 
 def _alternative_starts(
