@@ -322,3 +322,13 @@ def test_check_skips_exact_tests_on_large_models(capsys):
     data = json.loads(out)
     assert data["exact"] is False
     assert "invertibility" not in data
+
+
+def test_the_parser_is_built_without_the_numerical_libraries():
+    """`cappe --help` and the parser of every command need none of sympy, scipy or the estimators (their imports
+    take about 1.5 s): the commands import what they use when they run."""
+    code = ("import sys; from cappe.cli import build_parser; build_parser(); "
+            "print(sorted(m for m in ('sympy', 'scipy', 'cappe.model', 'cappe.io', 'cappe.estimate._base') "
+            "if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

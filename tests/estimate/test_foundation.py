@@ -166,3 +166,24 @@ def test_global_search_escapes_a_local_minimum(two_mass, strategy):
     est = fit_least_squares("test", space, residuals, strategy=strategy, rng=1)
     np.testing.assert_allclose(est.values, [1.1e6, 0.3e6], rtol=1e-6)
     assert est.diagnostics["global_search"]["strategy"] == strategy
+
+
+def test_the_package_loads_each_public_name_from_its_module_on_first_use():
+    """cappe.estimate imports its modules lazily (SPEC 1): every name of __all__ resolves, to the object its private
+    module defines, and nothing else does; a fresh interpreter importing the package loads none of them."""
+    import importlib
+    import subprocess
+    import sys
+
+    import cappe.estimate as package
+
+    assert set(package._MODULE) == set(package.__all__)
+    for name, module in package._MODULE.items():
+        assert getattr(package, name) is getattr(importlib.import_module(module), name), name
+    assert set(package.__all__) <= set(dir(package))
+    with pytest.raises(AttributeError, match="no attribute 'DirectEstimatr'"):
+        _ = package.DirectEstimatr
+    code = ("import sys, cappe.estimate, cappe.estimate._registry; "
+            "print(sorted(m for m in sys.modules if m.startswith('cappe.estimate.')), 'sympy' in sys.modules)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "['cappe.estimate._registry'] False"

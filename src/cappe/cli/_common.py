@@ -7,13 +7,17 @@ import json
 import math
 import sys
 from collections.abc import Mapping
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cappe.exceptions import DataError, ModelError
-from cappe.io import read_parameters, write_json
-from cappe.model import NumericModel, Structure, load_model
+
+if TYPE_CHECKING:
+    from cappe.model import NumericModel, Structure
+
+# the library is imported where a command needs it (as in every command module): `cappe --help` and the commands
+# that need no model do not pay for sympy and scipy.signal (about 1 s of imports)
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
 
@@ -78,9 +82,13 @@ class ModelContext:
     """The model, parameter values and position a command works on."""
 
     def __init__(self, args: argparse.Namespace) -> None:
+        from cappe.model import load_model
+
         self.structure: Structure = load_model(args.model)
         values: dict[str, float] = {}
         if args.params:
+            from cappe.io import read_parameters
+
             values.update(read_parameters(args.params))
         values.update(number_pairs(args.overrides, "--set"))
         self.values = self.structure.resolve_parameters(values)
@@ -90,6 +98,8 @@ class ModelContext:
 
     @property
     def numeric(self) -> NumericModel:
+        from cappe.model import NumericModel
+
         if self._numeric is None:
             self._numeric = NumericModel(self.structure)
         return self._numeric
@@ -111,6 +121,8 @@ def dominant_dofs(mass: Any, shapes: Any) -> Any:
 def emit(args: argparse.Namespace, data: Mapping[str, Any], text: str) -> None:
     """Print JSON or text, and write JSON to --out when asked."""
     if getattr(args, "out", None):
+        from cappe.io import write_json
+
         write_json(args.out, data)
     if getattr(args, "json", False):
         print(json.dumps(data, indent=2, default=_default))

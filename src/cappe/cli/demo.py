@@ -8,9 +8,6 @@ import time
 import numpy as np
 
 from cappe.cli._common import dominant_dofs, emit
-from cappe.exact import symbolic_transfer_function
-from cappe.model import NumericModel, derive, load_model
-from cappe.systems import transfer_function
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,6 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 def run(args: argparse.Namespace) -> int:
+    from cappe.exact import symbolic_transfer_function
+    from cappe.model import NumericModel, derive, load_model
+    from cappe.systems import transfer_function
+
     start = time.perf_counter()
     lines: list[str] = []
     data: dict[str, object] = {}
@@ -88,6 +89,7 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
     from cappe.cli.identify import summary_text
     from cappe.estimate import AutomatedIdentification, ParameterSpace
     from cappe.modal import reference_modes
+    from cappe.model import NumericModel, load_model
     from cappe.report import write_html_report
 
     t0 = time.perf_counter()
@@ -121,6 +123,7 @@ def _monitoring(args: argparse.Namespace, data: dict[str, object]) -> list[str]:
     """Thesis Fig. 1.1 on the spindle: a day of healthy data teaches the baseline, then three faults."""
     from datetime import timedelta
 
+    from cappe.model import NumericModel, load_model
     from cappe.monitor import Monitor, default_config, simulate_scenario
 
     t0 = time.perf_counter()

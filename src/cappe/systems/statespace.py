@@ -6,7 +6,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import scipy.signal as sig
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError, ModelError
@@ -53,6 +52,8 @@ class StateSpaceModel:
         if method not in ("zoh", "tustin"):
             msg = f"discretization method must be 'zoh' or 'tustin'; got {method!r}"
             raise ModelError(msg)
+        import scipy.signal as sig  # here: its import (0.6 s) would otherwise come with every model and file read
+
         scipy_method = "bilinear" if method == "tustin" else "zoh"
         ad, bd, cd, dd, _ = sig.cont2discrete((self.A, self.B, self.C, self.D), dt, method=scipy_method)
         return StateSpaceModel(ad, bd, cd, dd, float(dt), self.state_names, self.input_names, self.output_names, method)
