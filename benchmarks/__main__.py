@@ -12,6 +12,7 @@ from benchmarks import (
     bench_pipeline,
     bench_scaling,
     bench_sobol,
+    bench_startup,
 )
 
 
@@ -25,6 +26,7 @@ def main() -> None:
     bench_pipeline.main()
     bench_automated.main()
     bench_scaling.main()
+    bench_startup.main()
 
 
 if __name__ == "__main__":
