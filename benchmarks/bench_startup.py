@@ -41,9 +41,9 @@ def wall(command: list[str], repeat: int = 7) -> float:
 
 def main() -> None:
     rows = []
-    base = wall(CASES[0][1])
-    for label, command in CASES:
-        seconds = base if command == CASES[0][1] else wall(command)
+    walls = [wall(command) for _, command in CASES]
+    base = walls[0]  # python -c pass
+    for (label, _), seconds in zip(CASES, walls, strict=True):
         rows.append({"command": label, "wall_s": seconds, "above_interpreter_s": seconds - base})
         print(f"{label:42s} {seconds:6.2f} s  (interpreter start + {seconds - base:5.2f} s)")
     write_results("startup", rows)

@@ -52,7 +52,7 @@ class StateSpaceModel:
         if method not in ("zoh", "tustin"):
             msg = f"discretization method must be 'zoh' or 'tustin'; got {method!r}"
             raise ModelError(msg)
-        import scipy.signal as sig  # here: its import (0.6 s) would otherwise come with every model and file read
+        import scipy.signal as sig  # here: its import (0.6 s) would otherwise come with every file read (cappe.io)
 
         scipy_method = "bilinear" if method == "tustin" else "zoh"
         ad, bd, cd, dd, _ = sig.cont2discrete((self.A, self.B, self.C, self.D), dt, method=scipy_method)
