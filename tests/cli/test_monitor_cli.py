@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+import urllib.error
 import urllib.request
 from pathlib import Path
 
@@ -100,8 +101,9 @@ def test_serve_answers(monitored: Path, capsys, monkeypatch) -> None:
         return server
 
     monkeypatch.setattr(monitor_api, "make_server", capture)
-    thread = threading.Thread(target=main, args=(["monitor", "serve", str(monitored / "store.db"), "--port", "0"],),
-                              daemon=True)
+    argv = ["monitor", "serve", str(monitored / "store.db"), "--port", "0", "--allowed-host", "spindle-pc",
+            "--allowed-host", "spindle-pc.example.org"]
+    thread = threading.Thread(target=main, args=(argv,), daemon=True)
     thread.start()
     for _ in range(200):
         if "server" in started:
@@ -112,10 +114,24 @@ def test_serve_answers(monitored: Path, capsys, monkeypatch) -> None:
     try:
         with urllib.request.urlopen(f"{server.url}api/machines", timeout=10) as response:
             machines = json.loads(response.read())
+        for host, status in (("spindle-pc", 200), (f"spindle-pc.example.org:{server.port}", 200),
+                             ("attacker.example", 421)):
+            request = urllib.request.Request(f"{server.url}api/machines", headers={"Host": host})
+            try:
+                with urllib.request.urlopen(request, timeout=10) as response:
+                    got = response.status
+            except urllib.error.HTTPError as err:
+                with err:
+                    got = err.code
+            assert got == status, host
     finally:
         server.shutdown()
         thread.join(timeout=10)
     assert "spindle-01" in json.dumps(machines)
+    assert server.allowed_hosts == ("localhost", "127.0.0.1", "::1", "spindle-pc", "spindle-pc.example.org")
+    out = capsys.readouterr().out
+    assert f"at {server.url} (Ctrl-C stops it); answers to host names localhost, 127.0.0.1, [::1], spindle-pc, " \
+           "spindle-pc.example.org" in out
 
 
 @pytest.mark.parametrize(

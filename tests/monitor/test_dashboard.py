@@ -8,10 +8,12 @@ the page shows is compared with what the store returns for the same question.
 
 from __future__ import annotations
 
+import http.client
 import json
 import logging
 import os
 import shutil
+import socket
 import struct
 import threading
 import urllib.error
@@ -278,6 +280,118 @@ def test_acknowledge_refuses_other_origins_and_get(server: DashboardServer, stor
     same = server.url.rstrip("/")
     _json(server, f"api/alarm/{alarm.id}/acknowledge", method="POST", headers={"Origin": same})
     assert store.alarms(MACHINE)[0].acknowledged
+
+
+def _raw(server: DashboardServer, method: str, path: str, hosts: list[str]) -> tuple[int, str, bytes]:
+    """A request with exactly these Host headers (none, one or several), which urllib cannot send."""
+    connection = http.client.HTTPConnection(server.host, server.port, timeout=10)
+    try:
+        connection.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
+        for host in hosts:
+            connection.putheader("Host", host)
+        if method == "POST":
+            connection.putheader("Content-Length", "0")
+        connection.endheaders()
+        response = connection.getresponse()
+        return response.status, response.getheader("Content-Type") or "", response.read()
+    finally:
+        connection.close()
+
+
+FOREIGN_HOSTS = ["attacker.example", "attacker.example:{port}", "localhost.attacker.example", "127.0.0.1.nip.io",
+                 "localhost:1", "[::2]", "127.0.0.2", "", "localhost:", "local host", "::1"]
+
+
+@pytest.mark.parametrize("host", FOREIGN_HOSTS)
+@pytest.mark.parametrize(("method", "path"), [
+    ("GET", "/api/machines"), ("GET", f"/api/machine/{MACHINE}/status"), ("GET", "/"), ("GET", "/app.js"),
+    ("HEAD", "/api/machines"), ("GET", "/nothing/here"), ("POST", "/api/alarm/{alarm}/acknowledge"),
+])
+def test_foreign_host_refused(server: DashboardServer, store: HistoryStore, host: str, method: str, path: str) -> None:
+    """DNS rebinding: a page of another site whose name resolves to 127.0.0.1 gets nothing and changes nothing."""
+    alarm = store.alarms(MACHINE)[0]
+    code, content_type, body = _raw(server, method, path.format(alarm=alarm.id), [host.format(port=server.port)])
+    assert code == 421
+    assert content_type == "text/plain; charset=utf-8"
+    if method != "HEAD":
+        text = body.decode()
+        assert text.startswith(f"host {host.format(port=server.port)!r} is not served here; this dashboard answers "
+                               f"to localhost, 127.0.0.1, [::1] (port {server.port} or none)")
+        assert text.count("\n") == 1
+        assert MACHINE not in text
+    assert not store.alarms(MACHINE)[0].acknowledged
+
+
+@pytest.mark.parametrize("hosts", [[], ["127.0.0.1", "attacker.example"], ["127.0.0.1", "127.0.0.1"]])
+def test_missing_or_repeated_host_refused(server: DashboardServer, store: HistoryStore, hosts: list[str]) -> None:
+    alarm = store.alarms(MACHINE)[0]
+    for method, path in (("GET", "/api/machines"), ("POST", f"/api/alarm/{alarm.id}/acknowledge"), ("GET", "/")):
+        code, content_type, body = _raw(server, method, path, hosts)
+        assert (code, content_type) == (421, "text/plain; charset=utf-8")
+        assert body.decode() == f"a request needs exactly one Host header; got {len(hosts)}\n"
+    assert not store.alarms(MACHINE)[0].acknowledged
+
+
+@pytest.mark.parametrize("host", ["localhost", "localhost:{port}", "LocalHost.:{port}", "127.0.0.1",
+                                  "127.0.0.1:{port}", "[::1]", "[::1]:{port}", "[0:0::1]:{port}"])
+def test_served_host_names_accepted(server: DashboardServer, store: HistoryStore, host: str) -> None:
+    named = host.format(port=server.port)
+    code, _, body = _raw(server, "GET", "/api/machines", [named])
+    assert code == 200
+    assert [m["id"] for m in json.loads(body)["machines"]] == [MACHINE, OTHER]
+    assert _raw(server, "GET", "/", [named])[0] == 200
+    alarm = store.alarms(MACHINE)[0]
+    code, _, body = _raw(server, "POST", f"/api/alarm/{alarm.id}/acknowledge", [named])
+    assert code == 200
+    assert store.alarms(MACHINE)[0].acknowledged
+
+
+def test_configured_host_names_accepted(store: HistoryStore) -> None:
+    with make_server(store, allowed_hosts=["Dashboard.Example.ORG", "[2001:db8::7]", "192.0.2.7"]) as server:
+        server.start()
+        assert server.allowed_hosts == ("localhost", "127.0.0.1", "::1", "dashboard.example.org", "2001:db8::7",
+                                        "192.0.2.7")
+        for host in ("dashboard.example.org", f"dashboard.example.org:{server.port}", "DASHBOARD.example.org.",
+                     f"[2001:db8::7]:{server.port}", "192.0.2.7", "localhost"):
+            assert _raw(server, "GET", "/api/machines", [host])[0] == 200, host
+        alarm = store.alarms(MACHINE)[0]
+        code, _, _ = _raw(server, "POST", f"/api/alarm/{alarm.id}/acknowledge", ["dashboard.example.org"])
+        assert code == 200
+        assert store.alarms(MACHINE)[0].acknowledged
+        for host in ("example.org", "dashboard.example.org:1", "evil.dashboard.example.org", "2001:db8::7"):
+            code, _, body = _raw(server, "GET", "/api/machines", [host])
+            assert code == 421, host
+            assert b"answers to localhost, 127.0.0.1, [::1], dashboard.example.org, [2001:db8::7], 192.0.2.7" in body
+
+
+def test_non_loopback_bind_answers_to_its_address_only(store: HistoryStore) -> None:
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:  # this computer's address on its default route
+        try:
+            probe.connect(("192.0.2.1", 9))  # a UDP connect only picks the route; no packet is sent
+            address = probe.getsockname()[0]
+        except OSError:
+            address = ""
+    if address in ("0.0.0.0", "") or address.startswith("127."):
+        pytest.skip("this computer has no non-loopback IPv4 address")
+    with make_server(store, host=address) as server:
+        server.start()
+        assert server.allowed_hosts == (address,)
+        assert _raw(server, "GET", "/api/machines", [f"{address}:{server.port}"])[0] == 200
+        assert _raw(server, "GET", "/api/machines", ["localhost"])[0] == 421
+        assert _raw(server, "GET", "/api/machines", ["attacker.example"])[0] == 421
+
+
+def test_wildcard_bind_answers_to_loopback_and_configured_names(store: HistoryStore) -> None:
+    with make_server(store, host="0.0.0.0", allowed_hosts=["spindle-pc"]) as server:
+        assert server.allowed_hosts == ("localhost", "127.0.0.1", "::1", "spindle-pc")
+
+
+@pytest.mark.parametrize("bad", ["", "http://dashboard.example.org", "dashboard.example.org:8050", "a/b", "a b",
+                                 "-a.example", "a..b", 7])
+def test_allowed_hosts_checked(store: HistoryStore, bad: Any) -> None:
+    with pytest.raises(DataError, match=r"dashboard allowed host must be a host name or IP address without port, "
+                                        r"scheme or path .*; got "):
+        make_server(store, allowed_hosts=[bad])
 
 
 def test_frf_matches_store(server: DashboardServer, store: HistoryStore) -> None:

@@ -123,6 +123,9 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     _store_options(p, machine=False)
     p.add_argument("--host", default="127.0.0.1", help="interface (default 127.0.0.1: this computer only)")
     p.add_argument("--port", type=int, default=8050, help="port (default 8050; 0 picks a free one)")
+    p.add_argument("--allowed-host", metavar="NAME", action="append", default=[],
+                   help="a further host name the dashboard answers to, e.g. this computer's network name with "
+                        "--host 0.0.0.0 (repeatable); requests naming other hosts are refused (DNS rebinding)")
     p.set_defaults(func=serve)
 
 
@@ -364,8 +367,9 @@ def serve(args: argparse.Namespace) -> int:
     from cappe.monitor import make_server
 
     with _open(args.store) as store:
-        server = make_server(store, host=args.host, port=args.port)
-        print(f"cappe dashboard of {args.store} at {server.url} (Ctrl-C stops it)", flush=True)
+        server = make_server(store, host=args.host, port=args.port, allowed_hosts=args.allowed_host)
+        print(f"cappe dashboard of {args.store} at {server.url} (Ctrl-C stops it); answers to host names "
+              + ", ".join(f"[{n}]" if ":" in n else n for n in server.allowed_hosts), flush=True)
         try:
             server.serve_forever()
         except KeyboardInterrupt:

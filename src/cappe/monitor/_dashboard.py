@@ -20,6 +20,11 @@ ingest shows on the next reload:
                                             ``freq_k`` / ``zeta_k`` features of the map's modes)
 ==========================================  =========================================================================
 
+Every request must name the server in its ``Host`` header (DNS rebinding: a page of another site whose name
+resolves to this computer would otherwise read the store and acknowledge alarms): on a loopback interface
+``localhost``, ``127.0.0.1`` or ``[::1]``, on another interface the address it listens on, and any name given in
+``allowed_hosts``, each with the served port or without one. Other hosts, and requests without exactly one
+``Host`` header, are answered 421 with a short plain-text message, whatever the method and path.
 Unknown machines, alarms and paths answer 404, failures inside the server 500, both as ``{"error": message}``.
 Numbers that are not finite are sent as ``null``. Store access is serialized by a lock, so a store whose
 connection may not be shared between threads is safe behind the threaded server.
@@ -29,6 +34,7 @@ from __future__ import annotations
 
 import contextlib
 import functools
+import ipaddress
 import json
 import math
 import os
@@ -75,6 +81,10 @@ _MAX_BODY = 1 << 16
 
 _MACHINE_ROUTE = re.compile(r"^/api/machine/(?P<machine>[^/]+)/(?P<view>status|trends|alarms|frf|map)$")
 _ACK_ROUTE = re.compile(r"^/api/alarm/(?P<alarm>[^/]+)/acknowledge$")
+#: Names of this computer's loopback interface, accepted in the Host header of a loopback or wildcard bind.
+_LOOPBACK_NAMES = ("localhost", "127.0.0.1", "::1")
+#: A DNS host name (labels of letters, digits, '-' and '_', dot-separated, an optional final dot).
+_HOST_NAME = re.compile(r"^(?!-)[a-z0-9_-]{1,63}(?<!-)(\.(?!-)[a-z0-9_-]{1,63}(?<!-))*\.?$")
 
 
 class _NotFound(LookupError):
@@ -87,6 +97,88 @@ class _MethodNotAllowed(LookupError):
 
 class _Forbidden(PermissionError):
     """A state-changing request from another origin (answered with 403)."""
+
+
+# --------------------------------------------------------------------------------------------- host names
+
+
+def _host_name(text: str) -> str | None:
+    """A host name or IP address in the form the Host check compares: lower case, IPv6 without brackets, no final
+    dot; None when ``text`` is neither."""
+    name = text.strip().lower()
+    if name.startswith("[") and name.endswith("]"):
+        name = name[1:-1]
+    with contextlib.suppress(ValueError):
+        return ipaddress.ip_address(name).compressed
+    if len(name) > 254 or not _HOST_NAME.match(name):
+        return None
+    return name.rstrip(".")
+
+
+def _served_names(host: str, bound: str, allowed: Sequence[str]) -> tuple[str, ...]:
+    """Host names a server bound to ``bound`` (asked for as ``host``) answers to, besides ``allowed``.
+
+    Loopback and wildcard (``0.0.0.0``, ``::``) binds answer to the loopback names; a bind to one address answers
+    to that address and to the name it was asked for by.
+    """
+    names: list[str] = []
+    for text in (host, bound):
+        name = _host_name(text)
+        if name is None:
+            continue
+        try:
+            address = ipaddress.ip_address(name)
+        except ValueError:  # a name such as localhost or the computer's own
+            names.append(name)
+            continue
+        if address.is_loopback or address.is_unspecified:
+            names += _LOOPBACK_NAMES
+        if not address.is_unspecified:
+            names.append(name)
+    names += allowed
+    return tuple(dict.fromkeys(names))
+
+
+def _split_host(header: str) -> tuple[str | None, int | None]:
+    """Host and port of a Host header (``name``, ``name:port``, ``[v6]:port``); host None when malformed, port None
+    when absent."""
+    host, port_text = header, ""
+    if header.startswith("["):
+        close = header.find("]")
+        if close < 0:
+            return None, None
+        host, rest = header[: close + 1], header[close + 1 :]
+        if rest and not rest.startswith(":"):
+            return None, None
+        port_text = rest[1:]
+    elif header.count(":") == 1:
+        host, port_text = header.split(":")
+    elif ":" in header:  # an IPv6 address must be bracketed
+        return None, None
+    if port_text and not (port_text.isascii() and port_text.isdigit() and len(port_text) <= 5):
+        return None, None
+    if header.endswith(":"):
+        return None, None
+    return _host_name(host), int(port_text) if port_text else None
+
+
+def _allowed_hosts(allowed: Sequence[str] | str | None) -> tuple[str, ...]:
+    """Checked, normalized ``allowed_hosts`` of :func:`make_server`."""
+    if allowed is None:
+        return ()
+    if isinstance(allowed, str):
+        allowed = [allowed]
+    names = []
+    for text in allowed:
+        name = _host_name(text) if isinstance(text, str) else None
+        if name is None:
+            msg = (
+                "dashboard allowed host must be a host name or IP address without port, scheme or path "
+                f"(dashboard.example.org, 192.0.2.7, [2001:db8::7]); got {text!r}"
+            )
+            raise DataError(msg)
+        names.append(name)
+    return tuple(names)
 
 
 # --------------------------------------------------------------------------------------------- JSON helpers
@@ -467,6 +559,13 @@ class _Handler(BaseHTTPRequestHandler):
 
     def _dispatch(self, method: str) -> None:
         path = urllib.parse.urlsplit(self.path).path
+        refusal = self._host_refusal()
+        if refusal is not None:
+            _log.info("dashboard refused %s %s: %s", method, self.path, refusal)
+            self.close_connection = True  # the request body, if any, is not read
+            with contextlib.suppress(ConnectionError):
+                self._send(HTTPStatus.MISDIRECTED_REQUEST, f"{refusal}\n".encode(), "text/plain; charset=utf-8")
+            return
         try:
             if method == "POST":
                 self._read_body()
@@ -497,6 +596,21 @@ class _Handler(BaseHTTPRequestHandler):
             raise _Forbidden(msg)
         if length:
             self.rfile.read(length)
+
+    def _host_refusal(self) -> str | None:
+        """Why the request's Host header is not one this server answers to (DNS rebinding); None when it is."""
+        dashboard = self.server.dashboard
+        hosts = self.headers.get_all("Host") or []
+        if len(hosts) != 1:
+            return f"a request needs exactly one Host header; got {len(hosts)}"
+        name, port = _split_host(hosts[0])
+        if name in dashboard.allowed_hosts and port in (None, dashboard.port):
+            return None
+        served = ", ".join(f"[{n}]" if ":" in n else n for n in dashboard.allowed_hosts)
+        return (
+            f"host {hosts[0][:100]!r} is not served here; this dashboard answers to {served} (port "
+            f"{dashboard.port} or none); name others with --allowed-host (allowed_hosts)"
+        )
 
     def _check_origin(self) -> None:
         """Refuse state changes asked by a page from another origin (a cross-site form post)."""
@@ -562,11 +676,17 @@ class DashboardServer:
         Interface the server listens on.
     port : int
         Port the server listens on (the one the system chose when asked for port 0).
+    allowed_hosts : tuple of str
+        Host names and addresses accepted in a request's ``Host`` header (lower case, IPv6 without brackets),
+        with ``port`` or without a port.
     store : HistoryStore
         The store read on every request.
     """
 
-    def __init__(self, store: HistoryStore, httpd: _HTTPServer, *, owns_store: bool) -> None:
+    def __init__(
+        self, store: HistoryStore, httpd: _HTTPServer, *, owns_store: bool, asked_host: str,
+        allowed_hosts: Sequence[str],
+    ) -> None:
         self.store = store
         self._httpd = httpd
         self._owns_store = owns_store
@@ -582,6 +702,7 @@ class DashboardServer:
         self.port = int(port)
         shown = f"[{self.host}]" if ":" in self.host else self.host
         self.url = f"http://{shown}:{self.port}/"
+        self.allowed_hosts = _served_names(asked_host, self.host, allowed_hosts)
 
     def __repr__(self) -> str:
         state = "closed" if self._closed else ("serving" if self._serving else "ready")
@@ -660,7 +781,11 @@ class DashboardServer:
 
 
 def make_server(
-    store: HistoryStore | str | os.PathLike[str], *, host: str = "127.0.0.1", port: int = 0
+    store: HistoryStore | str | os.PathLike[str],
+    *,
+    host: str = "127.0.0.1",
+    port: int = 0,
+    allowed_hosts: Sequence[str] | None = None,
 ) -> DashboardServer:
     """Make the dashboard server of a history store (listening, not yet serving).
 
@@ -674,6 +799,11 @@ def make_server(
         can acknowledge alarms and has no authentication).
     port : int, optional
         TCP port in 0 ... 65535; 0 lets the system choose a free one (see ``DashboardServer.url``).
+    allowed_hosts : sequence of str, optional
+        Further names (or addresses) the server answers to in a request's ``Host`` header, e.g. the computer's
+        network name for a deliberate bind to ``0.0.0.0``. Without them it answers to ``localhost``,
+        ``127.0.0.1`` and ``[::1]`` on a loopback or wildcard interface and to the address it listens on
+        otherwise; requests naming another host (a DNS-rebinding page) are refused with 421.
 
     Returns
     -------
@@ -683,7 +813,8 @@ def make_server(
     Raises
     ------
     DataError
-        A store path that does not exist, or a port outside 0 ... 65535.
+        A store path that does not exist, a port outside 0 ... 65535, or an allowed host that is not a host name
+        or IP address.
     OSError
         The address cannot be bound (port in use, unknown host).
 
@@ -703,6 +834,7 @@ def make_server(
     if not isinstance(host, str) or not host:
         msg = f"dashboard host must be a non-empty string; got {host!r}"
         raise DataError(msg)
+    allowed = _allowed_hosts(allowed_hosts)
     owns_store = False
     if isinstance(store, (str, os.PathLike)):
         from cappe.monitor._store import HistoryStore
@@ -728,4 +860,4 @@ def make_server(
         if owns_store:
             store.close()
         raise
-    return DashboardServer(store, httpd, owns_store=owns_store)
+    return DashboardServer(store, httpd, owns_store=owns_store, asked_host=host, allowed_hosts=allowed)
