@@ -10,6 +10,7 @@ binary 58 and UFF 2411 (E25.16, 17 digits) are exact.
 from __future__ import annotations
 
 import json
+import re
 import warnings
 from pathlib import Path
 
@@ -643,3 +644,137 @@ def test_property_channel_names_round_trip(tmp_path, names, values, binary):
     else:  # E20.12 keeps 12 significant digits; values near the double range limits round to +-inf/0 otherwise
         finite = np.abs(data.values) < 1e300
         np.testing.assert_allclose(back.values[finite], data.values[finite], rtol=ASCII_RTOL, atol=1e-300)
+
+
+# ------------------------------------------------------------------------------------------- files cut short
+
+
+def _as_values(result):
+    """What a reader returned, as comparable plain values (arrays as lists)."""
+    if isinstance(result, TimeData):
+        return ("time", result.channels, result.units, result.time.tolist(), result.values.tolist())
+    if isinstance(result, FRFData):
+        coherence = None if result.coherence is None else result.coherence.tolist()
+        return ("frf", result.input_names, result.output_names, result.output_quantities, result.window_decay,
+                result.freq.tolist(), result.H.tolist(), coherence)
+    if isinstance(result, ModalData):
+        return ("modal", result.sensors, [(s.position, s.frequency.tolist(), s.damping.tolist(), s.shapes.tolist())
+                                          for s in result.sets])
+    return result  # nodes: a dict, function types: a list
+
+
+def _frf_then(path, dataset):
+    """A small foreign FRF file (pyuff) with one more dataset of another type at its end."""
+    _foreign_58(path, [{"func_type": 4, "rsp_node": 2, "rsp_dir": 3, "ref_node": 1, "ref_dir": 3,
+                        "x": np.linspace(0.0, 70.0, 8), "data": np.arange(8.0) * (1 - 2j)}])
+    pyuff.UFF(str(path)).write_sets([dataset], mode="add")
+    return path
+
+
+_GROUP = {"group_number": 1, "group_name": "node base", "entity_type_code": np.array([7]),
+          "entity_tag": np.array([3]), "entity_node_leaf_id": np.array([0]), "entity_component_id": np.array([0]),
+          **dict.fromkeys(("active_constraint_set_no_for_group", "active_restraint_set_no_for_group",
+                           "active_load_set_no_for_group", "active_dof_set_no_for_group",
+                           "active_temperature_set_no_for_group", "active_contact_set_no_for_group"), 0)}
+
+# name: (write the file at a path, read it); every last dataset type cappe's readers meet, written by cappe's
+# writers and, as an independent reference, by pyuff directly
+CUT_FILES = {
+    "time 58": (lambda p: write_uff_time_data(p, _time_data(np.random.default_rng(1), n=9)), read_uff_time_data),
+    "time 58b": (lambda p: write_uff_time_data(p, _time_data(np.random.default_rng(1), n=9), binary=True),
+                 read_uff_time_data),
+    "frf 58 with coherence": (lambda p: write_uff_frf(p, _frf_data(np.random.default_rng(2), np.linspace(0, 90, 7))),
+                              read_uff_frf),
+    "frf 58b": (lambda p: write_uff_frf(p, _frf_data(np.random.default_rng(2), np.linspace(0, 90, 7)), binary=True),
+                read_uff_frf),
+    "function types 58": (lambda p: write_uff_frf(p, _frf_data(np.random.default_rng(2), np.linspace(0, 90, 7))),
+                          uff_function_types),
+    "modal 55 after 2411": (lambda p: write_uff_modal(p, _modal(np.random.default_rng(3)),
+                                                      coordinates={"tool": (0, 0, 0.1), "base": (1, 2, 3)}),
+                            read_uff_modal),
+    "modal 55 real after 15": (lambda p: write_uff_modal(p, _modal(np.random.default_rng(3), complex_shapes=False),
+                                                         coordinates={"tool": (0, 0, 0.1)}, node_dataset=15),
+                               read_uff_modal),
+    "nodes 2411 after 2467": (lambda p: write_uff_nodes(p, {"base": (0.1, -0.2, 1 / 3), 5: (1.0, 2.0, 3.0)}),
+                              read_uff_nodes),
+    "nodes 15 after 2467": (lambda p: write_uff_nodes(p, {"base": (0.1, -0.2, 0.3), 5: (1.0, 2.0, 3.0)},
+                                                      dataset=15), read_uff_nodes),
+    "nodes 2411 only": (lambda p: write_uff_nodes(p, {5: (1.0, 2.0, 3.0)}), read_uff_nodes),
+    "pyuff time 58": (lambda p: _foreign_58(p, [
+        {"func_type": 1, "rsp_node": n, "rsp_dir": 3, "ref_node": 0, "ref_dir": 0, "x": np.arange(6) / 100.0,
+         "data": np.arange(6.0) * n} for n in (1, 2)]), read_uff_time_data),
+    "pyuff frf 58b": (lambda p: _foreign_58(p, [
+        {"func_type": 4, "rsp_node": n, "rsp_dir": 3, "ref_node": 1, "ref_dir": 3, "x": np.linspace(0.0, 70.0, 8),
+         "data": np.arange(8.0) * (n - 2j)} for n in (1, 2)], binary=1), read_uff_frf),
+    "pyuff modes 55 after 15": (lambda p: _foreign_55(p, [((20.0, 0.01), np.eye(3)[:, :2]),
+                                                          ((50.0, 0.02), np.eye(3)[:, 1:])], [1, 2],
+                                                      analysis_type=2), read_uff_modal),
+    "pyuff nodes 2411": (lambda p: pyuff.UFF(str(p)).write_sets(
+        [pyuff.prepare_2411(node_nums=[1, 2], def_cs=[0, 0], disp_cs=[0, 0], color=[0, 0], x=[0.0, 1.0],
+                            y=[0.5, 0.25], z=[1 / 3, 2.0])], mode="add") or p, read_uff_nodes),
+    "pyuff frf then 151": (lambda p: _frf_then(p, pyuff.prepare_151(
+        model_name="rig", description="impact test", db_app="cappe", date_db_created="01-Jan-26",
+        time_db_created="06:00:00", version_db1=1, version_db2=0, file_type=0, date_db_saved="01-Jan-26",
+        time_db_saved="06:00:00", program="pyuff", date_db_written="01-Jan-26", time_db_written="06:00:00")),
+        read_uff_frf),
+    "pyuff frf then 164": (lambda p: _frf_then(p, pyuff.prepare_164(
+        units_code=1, units_description="SI", temp_mode=1, length=1.0, force=1.0, temp=1.0, temp_offset=273.15)),
+        read_uff_frf),
+    "pyuff frf then 82": (lambda p: _frf_then(p, pyuff.prepare_82(trace_num=1, n_nodes=3, color=8, id="line",
+                                                                   nodes=np.array([1, 2, 1]))), read_uff_frf),
+    "pyuff frf then 2467": (lambda p: _frf_then(p, {"type": 2467, "groups": [_GROUP]}), read_uff_frf),
+}
+
+
+def _cuts(opening, end, edge=120, stride=7):
+    """Offsets from just inside the last dataset's opening line to just before its closing line ends: every one
+    within ``edge`` bytes of either end (header, type line, last values, closing line), every ``stride``-th between."""
+    inside = range(opening + 1, end)
+    return sorted({*inside[:edge], *inside[-edge:], *inside[::stride]})
+
+
+@pytest.mark.parametrize("name", list(CUT_FILES))
+def test_file_cut_inside_its_last_dataset_is_refused(tmp_path, name):
+    """A file cut anywhere inside its last dataset (a copy cut short, a file still being written) is refused
+    with a DataError naming the file and the dataset; cut after the last closing line it reads in full."""
+    write, read = CUT_FILES[name]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ResourceWarning)  # pyuff's binary writer leaves its last handle to CPython
+        path = write(tmp_path / "full.uff")
+    whole = _as_values(read(path))
+    full = path.read_bytes()
+    types = [int(t) for t in pyuff.UFF(str(path)).get_set_types()]
+    body = full.rstrip(b"\r\n")
+    assert body.endswith(b"    -1")  # after a line end, or straight after the bytes of a binary 58b dataset
+    closing = len(body) - 6
+    opening = full.rfind(b"    -1\n", 0, closing)  # the writers' opening line
+    assert opening == 0 or full[opening - 1 : opening] == b"\n"
+    last = full[opening:closing].split(b"\n")[1]
+    code = f"{types[-1]}{'b' if last[6:7] == b'b' else ''}"
+    assert code in name.split()
+    cut = tmp_path / "cut.uff"
+    message = re.compile(rf"dataset #{len(types)} (\(UFF ({code}|type cut off)\) )?of {re.escape(str(cut))} ends "
+                         r"before its data is complete: the file stops (without|inside) its (type|opening '    -1'"
+                         r"|closing '    -1') line \(cut short, or still being written\)$")
+    for offset in _cuts(opening, closing + 6):
+        cut.write_bytes(full[:offset])
+        with pytest.raises(DataError) as caught:
+            read(cut)
+        assert message.match(str(caught.value)), (offset, str(caught.value))
+    for offset in range(closing + 6, len(full) + 1):  # the closing line complete, its line end cut or not
+        cut.write_bytes(full[:offset])
+        assert _as_values(read(cut)) == whole, offset
+
+
+@pytest.mark.parametrize(("name", "kind"), [("time 58", "58"), ("frf 58b", "58b"), ("modal 55 after 2411", "55"),
+                                            ("pyuff frf then 151", "151"), ("nodes 2411 only", "2411")])
+def test_missing_closing_line_is_refused(tmp_path, name, kind):
+    write, read = CUT_FILES[name]
+    path = write(tmp_path / "full.uff")
+    n = len(pyuff.UFF(str(path)).get_set_types())
+    text = path.read_bytes()
+    assert text.endswith(b"    -1\n")
+    path.write_bytes(text[: -len(b"    -1\n")])
+    with pytest.raises(DataError, match=rf"^dataset #{n} \(UFF {kind}\) of {re.escape(str(path))} ends before "
+                                        r"its data is complete: the file stops without its closing '    -1' line"):
+        read(path)

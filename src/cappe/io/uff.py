@@ -53,6 +53,12 @@ for a scalar point); FRF outputs from the response DOF and inputs from the refer
 mode (UFF's convention for unmeasured DOFs). Units come from the ordinate axis-units label, output quantities
 from the ordinate specific data type (8 displacement, 11 velocity, 12 acceleration).
 
+Incomplete files
+----------------
+Every dataset lies between two ``    -1`` lines. A file that stops inside its last dataset (a copy cut short, a file
+still being written by the acquisition software) is refused with a DataError naming the file and the dataset
+(``dataset #12 (UFF 58) of run.uff ends before its data is complete``) rather than read without that dataset.
+
 Precision
 ---------
 Binary UFF 58 stores ordinates and an uneven abscissa as IEEE doubles (exact). ASCII UFF 58 stores ordinates with
@@ -120,6 +126,7 @@ _GROUP_WIDTH = 40
 _ID_WIDTH = 80
 _NODE_ENTITY = 7  # UFF 2467 entity type code of a node
 _SENSOR_GROUP, _NODE_GROUP = "sensor ", "node "
+_DELIMITER = b"    -1"  # the line that opens and closes every dataset
 
 # ordinate "specific data type" codes (UFF 58 record 9) by output quantity and by SI unit
 _QUANTITY_TYPES = {"displacement": 8, "elongation": 8, "velocity": 11, "acceleration": 12}
@@ -151,6 +158,63 @@ def _write_datasets(path: str | Path, datasets: Sequence[dict[str, Any]]) -> Non
             raise DataError(msg) from exc
 
 
+def _delimiters(data: bytes) -> list[int]:
+    """Offsets of the ``    -1`` lines that open and close datasets, found by pyuff's rule (``UFF.refresh``: the
+    six characters followed by a line end, the end of the file or 74 blanks), so that they pair as pyuff's do."""
+    found = []
+    at = data.find(_DELIMITER)
+    while at >= 0:
+        end = at + len(_DELIMITER)
+        if end == len(data) or data[end] in b"\r\n" or (at + 80 < len(data) and data[end : at + 80] == b" " * 74):
+            found.append(at)
+        at = data.find(_DELIMITER, at + 1)
+    return found
+
+
+def _check_complete(p: Path) -> None:
+    """Refuse a file that stops inside its last dataset (cut short, or still being written).
+
+    pyuff pairs the ``    -1`` lines and drops a last dataset without its closing one; the reader would return the
+    other datasets as if the file held no more.
+    """
+    try:
+        data = p.read_bytes()
+    except OSError as exc:
+        msg = f"cannot read UFF file {p}: {exc.strerror or exc}"
+        raise DataError(msg) from exc
+    marks = _delimiters(data)
+    if len(marks) % 2 == 0:
+        # after the last closing line (and its line end): nothing, more lines, or a next opening line cut short
+        rest = data
+        if marks:
+            end = data.find(b"\n", marks[-1])
+            rest = b"" if end < 0 else data[end + 1 :]
+        rest = rest.lstrip(b"\r\n")
+        if not rest or not _DELIMITER.startswith(rest):
+            return
+        what = "its opening '    -1' line"
+    else:
+        rest = data[marks[-1] + len(_DELIMITER) :].lstrip(b"\r\n")
+        line, newline, _ = rest.partition(b"\n")
+        code = line[:6].strip()
+        if newline and code.isdigit():
+            kind = f"UFF {int(code)}{'b' if line[6:7].lower() == b'b' else ''}"
+            what = "its closing '    -1' line"
+        else:
+            kind = "UFF type cut off"
+            what = "its type line"
+        msg = (
+            f"dataset #{len(marks) // 2 + 1} ({kind}) of {p} ends before its data is complete: the file stops "
+            f"without {what} (cut short, or still being written)"
+        )
+        raise DataError(msg)
+    msg = (
+        f"dataset #{len(marks) // 2 + 1} of {p} ends before its data is complete: the file stops inside {what} "
+        "(cut short, or still being written)"
+    )
+    raise DataError(msg)
+
+
 def _open_uff(path: str | Path) -> tuple[Path, Any, list[int]]:
     p = Path(path)
     if not p.is_file():
@@ -162,6 +226,7 @@ def _open_uff(path: str | Path) -> tuple[Path, Any, list[int]]:
     except Exception as exc:  # pyuff raises bare Exception
         msg = f"cannot read UFF file {p}: {exc}"
         raise DataError(msg) from exc
+    _check_complete(p)
     if not types:
         msg = f"{p} holds no UFF datasets (blocks between '    -1' lines); supported: {SUPPORTED}"
         raise DataError(msg)
