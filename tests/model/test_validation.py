@@ -194,3 +194,58 @@ def test_checks_cover_every_combination_of_axis_positions():
     b.axis("b", [0.0, 1.0])
     with pytest.raises(ModelError, match=r"body 'slide' mass must be > 0; got -0\.5"):
         b.body("slide", mass="m - a*b", dofs=["x"])
+
+
+# -- numbers as engineers write them, and files that are not model text ------------------------------------
+
+
+@pytest.mark.parametrize("spelling", ["1e6", "1.0e6", "1E6", "1.e6", "+1e6", "1_000_000", "1000000.", "10e5"])
+def test_every_ordinary_float_spelling_is_a_number(spelling):
+    # PyYAML (YAML 1.1) reads 1.0e6 and 1e6 as strings; cappe reads them as numbers wherever a number goes,
+    # including places that take only numbers (inertia, bounds, axis positions)
+    text = (
+        BASE.replace("value: 1.0e6", f"value: {spelling}")
+        .replace("xx: 0.1", "xx: 1e-1")
+        .replace("bounds: [1.0e5, 1.0e7]", "bounds: [1e5, 1E7]")
+    )
+    structure = load(text)
+    assert structure.parameter("k").value == 1e6
+    assert structure.parameter("k").bounds == (1e5, 1e7)
+
+
+def test_non_utf8_model_file_is_a_located_error(tmp_path):
+    path = tmp_path / "latin1.yaml"
+    path.write_bytes(BASE.replace("name: block", "name: block\ndescription: Bohrmaschine Gro\xdfe").encode("latin-1"))
+    with pytest.raises(ModelError, match=r"latin1\.yaml is not UTF-8 text: byte 0xdf at line 3"):
+        load_model(path)
+
+
+@pytest.mark.parametrize(
+    "text",
+    ["a:\n" + "".join("  " * i + "- \n" for i in range(1, 3000)), "[" * 100_000, "{a: " * 50_000],
+)
+def test_deeply_nested_yaml_is_a_clean_error(text):
+    with pytest.raises(ModelError, match=r"model\.yaml"):
+        load(text)
+
+
+def test_oversized_model_file_is_refused_before_parsing(tmp_path):
+    path = tmp_path / "huge.yaml"
+    path.write_bytes(b"# " + b"x" * (17 * 2**20))
+    with pytest.raises(ModelError, match=r"huge\.yaml is larger than 16 MiB"):
+        load_model(path)
+
+
+def test_integer_beyond_float_range_is_a_located_error():
+    text = BASE.replace("value: 2.0", "value: " + "9" * 400)
+    with pytest.raises(ModelError, match=r"parameter.*model\.yaml, parameters\[0\]"):
+        load(text)
+    text = BASE.replace("mass: m", "mass: " + "9" * 400)
+    with pytest.raises(ModelError, match=r"below 1\.8e308\); got a larger integer \(model\.yaml, bodies\[0\]\.mass\)"):
+        load(text)
+
+
+def test_integer_with_more_digits_than_python_reads_names_its_line():
+    text = BASE.replace("value: 2.0", "value: " + "9" * 5000)
+    with pytest.raises(ModelError, match=r"model\.yaml at line 4, column .*integer of 5000 digits"):
+        load(text)

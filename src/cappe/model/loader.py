@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -15,9 +16,42 @@ __all__ = ["FORMAT", "load_model", "structure_from_mapping"]
 
 FORMAT = "cappe.model/1"
 BUILTIN_PREFIX = "builtin:"
+#: Largest model file read (the built-in machine tool's is 30 kB; FE matrices live in files of their own).
+MAX_MODEL_BYTES = 16 * 2**20
+
+
+def _float_spellings(base: Any) -> Any:
+    """A safe loader that also reads 1e5, 1.0e5, 1E-3 and .5 as numbers.
+
+    PyYAML follows YAML 1.1, whose floats need a dot and a signed exponent: ``1.0e5`` would be the string
+    '1.0e5'. Engineers write numbers that way, so every spelling of YAML 1.2's core schema is a float here.
+    """
+    loader: Any = type(f"Cappe{base.__name__}", (base,), {})
+    loader.add_constructor("tag:yaml.org,2002:int", _bounded_int)
+    loader.add_implicit_resolver(
+        "tag:yaml.org,2002:float",
+        re.compile(r"^[-+]?(?:\.[0-9]+|[0-9][0-9_]*(?:\.[0-9_]*)?)(?:[eE][-+]?[0-9]+)?$"),
+        list("-+0123456789."),
+    )
+    return loader
+
+
+def _bounded_int(loader: Any, node: Any) -> Any:
+    """YAML's integer, refused with its line where it has more digits than any float (Python itself refuses
+    to read more than 4300 without a line)."""
+    digits = sum(c.isdigit() for c in str(node.value))
+    if digits > _MAX_INT_DIGITS:
+        problem = f"an integer of {digits} digits is beyond the floating-point range"
+        raise yaml.constructor.ConstructorError(None, None, problem, node.start_mark)
+    return yaml.constructor.SafeConstructor.construct_yaml_int(loader, node)
+
+
+_MAX_INT_DIGITS = 400
+
 #: libyaml's safe loader where PyYAML was built with it (0.05 s less of the machine tool's 1.1 s load and compile);
 #: the same documents and types. A document it rejects is parsed again by the pure-Python loader for the message.
-_SAFE_LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+_SAFE_LOADER: Any = _float_spellings(getattr(yaml, "CSafeLoader", yaml.SafeLoader))
+_PURE_LOADER: Any = _float_spellings(yaml.SafeLoader)
 
 _TOP = {
     "format",
@@ -69,9 +103,19 @@ def load_model(source: str | Path) -> Structure:
         path = Path(source)
         label = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        with path.open("rb") as handle:
+            raw = handle.read(MAX_MODEL_BYTES + 1)
     except OSError as exc:
         msg = f"cannot read model file {label}: {exc.strerror or exc}"
+        raise ModelError(msg) from exc
+    if len(raw) > MAX_MODEL_BYTES:
+        msg = f"model file {label} is larger than {MAX_MODEL_BYTES // 2**20} MiB; a model description is not that long"
+        raise ModelError(msg)
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        line = raw[: exc.start].count(b"\n") + 1
+        msg = f"model file {label} is not UTF-8 text: byte 0x{raw[exc.start]:02x} at line {line} cannot be decoded"
         raise ModelError(msg) from exc
     return structure_from_yaml(text, label)
 
@@ -82,6 +126,9 @@ def structure_from_yaml(text: str, label: str = "<string>") -> Structure:
         data = yaml.load(text, Loader=_SAFE_LOADER)
     except yaml.YAMLError:
         data = _parse_for_message(text, label)
+    except RecursionError as exc:
+        msg = f"model file {label} nests its YAML too deeply to be a model description"
+        raise ModelError(msg) from exc
     if not isinstance(data, Mapping):
         msg = f"model file {label} must contain a mapping at the top level; got {type(data).__name__}"
         raise ModelError(msg)
@@ -92,7 +139,10 @@ def _parse_for_message(text: str, label: str) -> Any:
     """Parse with PyYAML's pure-Python loader, whose errors name the offending character or alias (libyaml's
     only say what kind of thing went wrong); raise its error, with line and column, as a ModelError."""
     try:
-        return yaml.safe_load(text)
+        return yaml.load(text, Loader=_PURE_LOADER)
+    except RecursionError as exc:
+        msg = f"model file {label} nests its YAML too deeply to be a model description"
+        raise ModelError(msg) from exc
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         line = f"line {mark.line + 1}, column {mark.column + 1}" if mark is not None else "unknown line"

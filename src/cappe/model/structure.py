@@ -881,10 +881,19 @@ def _finite(value: object, what: str, where: str) -> float:
         raise ModelError(msg)
     try:
         number = float(value)  # type: ignore[arg-type]
+    except OverflowError as exc:
+        msg = f"{what} must be within the floating-point range; got an integer beyond it ({where})"
+        raise ModelError(msg) from exc
     except (TypeError, ValueError) as exc:
-        msg = f"{what} must be a number; got {value!r} ({where})"
+        msg = f"{what} must be a number; got {_short(value)} ({where})"
         raise ModelError(msg) from exc
     if not math.isfinite(number):
         msg = f"{what} must be finite; got {value!r} ({where})"
         raise ModelError(msg)
     return number
+
+
+def _short(value: object, limit: int = 80) -> str:
+    """``repr(value)`` cut to ``limit`` characters for a message."""
+    text = repr(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
