@@ -185,3 +185,103 @@ def test_ingest_without_baseline_says_so(tmp_path: Path, capsys) -> None:
     assert record.timestamp.isoformat() == "2026-02-01T10:00:00+00:00"  # naive times are read as UTC
     assert config["detection"] == "ewma"
     assert config["severity"] == {"tolerable": 0.1, "intolerable": 0.3}
+
+
+# ------------------------------------------------------------------------------------- a multi-file ingest that fails
+
+
+@pytest.fixture(scope="module")
+def healthy_csv(tmp_path_factory) -> Path:
+    """Three healthy measurements of machine 'm' as CSV files, and the store config they fit."""
+    folder = tmp_path_factory.mktemp("ingest-failure")
+    assert main(["monitor", "init", str(folder / "template.db"), "--machine", "m", "--model", "builtin:spindle-bearing",
+                 "--outputs", "sx,hax", "--band", "150:1000"]) == 0
+    assert main(["monitor", "simulate", "healthy", "--store", str(folder / "template.db"), "-n", "3", "--format", "csv",
+                 "--seed", "5", "-o", str(folder / "sim")]) == 0
+    return folder
+
+
+@pytest.fixture
+def ingest_dir(healthy_csv: Path, tmp_path: Path, monkeypatch) -> Path:
+    """A fresh store s.db with machine 'm' and the files a1.csv, a2.csv, c.csv (good) and b.csv (not a measurement)
+    in the working directory, so that messages show the names as typed."""
+    import shutil
+
+    shutil.copyfile(healthy_csv / "template.db", tmp_path / "s.db")
+    for k, name in enumerate(("a1.csv", "a2.csv", "c.csv")):
+        shutil.copyfile(healthy_csv / "sim" / f"m{k:05d}.csv", tmp_path / name)
+    (tmp_path / "b.csv").write_text("time,sx\n0.0,1.0\nnot a number,2.0\n")
+    monkeypatch.chdir(tmp_path)
+    return tmp_path
+
+
+def _sources(store: Path) -> list[str]:
+    with HistoryStore(store) as history:
+        return [r.source for r in history.measurements("m")]
+
+
+def _one_line(err: str) -> str:
+    assert err.endswith("\n")
+    assert err.count("\n") == 1, err  # one line: no traceback, no progress bar
+    assert "Traceback" not in err
+    return err[:-1]
+
+
+def test_ingest_failure_says_which_file_and_what_was_recorded(ingest_dir: Path, capsys) -> None:
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "a2.csv", "b.csv", "c.csv")
+    assert code == 1
+    line = _one_line(err)
+    assert line.startswith("cappe: error: b.csv: ")
+    assert line.endswith("; 2 earlier file(s) (a1.csv, a2.csv) were recorded, b.csv was not recorded, the 1 file(s) "
+                         "after it were not ingested")
+    assert _sources(ingest_dir / "s.db") == ["a1.csv", "a2.csv"]  # the message is true
+
+
+def test_ingest_failure_at_the_first_or_last_file(ingest_dir: Path, capsys) -> None:
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "b.csv", "a1.csv", "a2.csv")
+    assert code == 1
+    line = _one_line(err)
+    assert line.startswith("cappe: error: b.csv: ")
+    assert line.endswith("; nothing was recorded; the 2 file(s) after it were not ingested")
+    assert _sources(ingest_dir / "s.db") == []
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "b.csv", "--json")
+    assert code == 1
+    assert _one_line(err).endswith("; 1 earlier file(s) (a1.csv) were recorded, b.csv was not recorded")
+    assert _sources(ingest_dir / "s.db") == ["a1.csv"]
+
+
+def test_ingest_of_a_missing_file_records_nothing(ingest_dir: Path, capsys) -> None:
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "gone.csv", "a2.csv")
+    assert code == 1
+    assert _one_line(err) == "cappe: error: gone.csv: No such file or directory; nothing was recorded"
+    assert _sources(ingest_dir / "s.db") == []
+
+
+def test_ingest_failure_after_the_file_was_recorded(ingest_dir: Path, capsys, monkeypatch) -> None:
+    """A failure after the measurement's own record (in the slow path, say) says that file was recorded too."""
+    import cappe.monitor as monitor_api
+    from cappe.exceptions import DataError
+
+    real = monitor_api.ingest
+
+    def failing_after(store, machine, data, **kwargs):
+        result = real(store, machine, data, **kwargs)
+        if kwargs["source"] == "a2.csv":
+            msg = "slow path failed\nin two lines"
+            raise DataError(msg)
+        if kwargs["source"] == "c.csv":
+            msg = "not a cappe error"
+            raise RuntimeError(msg)
+        return result
+
+    monkeypatch.setattr(monitor_api, "ingest", failing_after)
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "a2.csv", "c.csv")
+    assert code == 1
+    assert _one_line(err) == ("cappe: error: a2.csv: slow path failed in two lines; 1 earlier file(s) (a1.csv) were "
+                              "recorded, a2.csv itself was recorded before the failure, the 1 file(s) after it were "
+                              "not ingested")
+    assert _sources(ingest_dir / "s.db") == ["a1.csv", "a2.csv"]
+    with pytest.raises(RuntimeError, match="not a cappe error") as caught:  # a bug keeps its traceback, with a note
+        main(["monitor", "ingest", "s.db", "c.csv"])
+    assert caught.value.__notes__ == ["cappe monitor ingest stopped at c.csv: c.csv itself was recorded before the "
+                                      "failure"]

@@ -14,6 +14,7 @@ from typing import Any
 
 from cappe.cli._common import ModelContext, UsageError, emit, names, number_pairs, text_pairs
 from cappe.cli._common import band as parse_band
+from cappe.exceptions import DataError, ModelError
 
 __all__ = ["register"]
 
@@ -237,7 +238,14 @@ def ingest(args: argparse.Namespace) -> int:
         raise UsageError(msg)
     for name in args.files:
         path = Path(name)
-        when = _when(args.time, "--time") if args.time else datetime.fromtimestamp(path.stat().st_mtime, UTC)
+        if args.time:
+            when = _when(args.time, "--time")
+        else:
+            try:
+                when = datetime.fromtimestamp(path.stat().st_mtime, UTC)
+            except OSError as exc:
+                msg = f"{path}: {exc.strerror or exc}; nothing was recorded"
+                raise DataError(msg) from exc
         jobs.append((path, when, conditions))
     if not jobs:
         msg = "give measurement FILEs or --manifest"
@@ -247,11 +255,27 @@ def ingest(args: argparse.Namespace) -> int:
     with _open(args.store) as store:
         machine = _machine(args, store)
         monitor = Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
-        for path, when, conds in tqdm(jobs, desc="ingest", unit="meas", disable=len(jobs) < 3 or args.json,
-                                      leave=False):
-            result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
-                                conditions=conds, monitor=monitor)
-            results.append({"file": str(path), **result.to_dict()})
+        # a progress bar on a terminal only: never in a log, a pipe or next to an error message
+        progress = tqdm(jobs, desc="ingest", unit="meas", disable=(len(jobs) < 3 or args.json) or None, leave=False)
+        for index, (path, when, conds) in enumerate(progress):
+            before: set[int] | None = None
+            try:
+                before = _recorded(store, machine, path, when)
+                result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
+                                    conditions=conds, monitor=monitor)
+                results.append({"file": str(path), **result.to_dict()})
+            except BaseException as exc:
+                progress.close()
+                after = None if before is None else _recorded(store, machine, path, when, failed=True)
+                itself = False if before is None else None if after is None else bool(after - before)
+                done = [Path(r["file"]) for r in results]
+                what = _ingest_stopped(path, done, itself, len(jobs) - index - 1)
+                if isinstance(exc, (DataError, ModelError, OSError)):
+                    text = " ".join(str(exc).split()) or type(exc).__name__
+                    msg = f"{path}: {text}; {what}"
+                    raise DataError(msg) from exc
+                exc.add_note(f"cappe monitor ingest stopped at {path}: {what}")
+                raise
             for alarm in result.alarms:
                 lines.append(f"ALARM {when.isoformat()} {path.name}: {alarm.message}")
         counts = store.counts(machine)
@@ -266,6 +290,38 @@ def ingest(args: argparse.Namespace) -> int:
         lines.append("active faults: " + ", ".join(f"{k} ({v})" for k, v in last["active"].items()))
     emit(args, {"machine": machine, "measurements": results, "counts": counts}, "\n".join(lines))
     return 0
+
+
+def _recorded(store: Any, machine: str, path: Path, when: datetime, *, failed: bool = False) -> set[int] | None:
+    """Ids of the measurements recorded from ``path`` at ``when`` (a source is recorded once per machine); None
+    when the store cannot tell after a failure."""
+    try:
+        return {r.id for r in store.measurements(machine, since=when, until=when) if r.source == str(path)}
+    except Exception:
+        if not failed:
+            raise
+        return None
+
+
+def _file_list(paths: list[Path]) -> str:
+    shown = [str(p) for p in paths]
+    return ", ".join(shown if len(shown) <= 4 else [*shown[:2], "...", shown[-1]])
+
+
+def _ingest_stopped(path: Path, done: list[Path], itself: bool | None, later: int) -> str:
+    """What a multi-file ingest that failed at ``path`` left recorded: the files before it (each recorded in its
+    own transactions), ``path`` itself (None: unknown), and the ``later`` files not attempted."""
+    after = f"the {later} file(s) after it were not ingested" if later else ""
+    if itself is None:
+        own = f"whether {path} was recorded is unknown"
+    elif itself:
+        own = f"{path} itself was recorded before the failure"
+    else:
+        own = f"{path} was not recorded"
+    if not done and itself is False:
+        return "nothing was recorded" + (f"; the {later} file(s) after it were not ingested" if later else "")
+    earlier = f"{len(done)} earlier file(s) ({_file_list(done)}) were recorded" if done else ""
+    return ", ".join(part for part in (earlier, own, after) if part)
 
 
 def baseline(args: argparse.Namespace) -> int:
