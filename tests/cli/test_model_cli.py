@@ -269,6 +269,33 @@ def test_readme_python_api_runs(tmp_path, monkeypatch):
     exec(compile(block, "README.md", "exec"), {})  # noqa: S102 (our own documentation)
 
 
+def _readme_yaml_blocks() -> list[str]:
+    docs = [README, *sorted((README.parent / "docs").glob("*.md"))]
+    return [block.split("```", 1)[0] for doc in docs for block in doc.read_text().split("```yaml\n")[1:]]
+
+
+def test_readme_has_yaml_blocks():
+    assert _readme_yaml_blocks()
+
+
+@pytest.mark.parametrize("block", _readme_yaml_blocks())
+def test_every_documented_yaml_model_loads(block, tmp_path, capsys):
+    # each model shown in the documentation loads and gives modes as written (the README's sled once failed on
+    # its own 1.0e5, which PyYAML reads as a string)
+    path = tmp_path / "model.yaml"
+    path.write_text(block)
+    code, out, err = run(capsys, "model", "modes", str(path), "--json")
+    assert code == 0, err
+    modes = json.loads(out)["modes"]
+    assert modes
+    if "name: sled" in block:
+        # independent check: the table's x motion is a single oscillator (the shoe's x spring acts through the
+        # centre's x line, so no moment): f = sqrt(k/m)/(2 pi), zeta = c/(2 sqrt(k m)) with k 2e6, m 3, c 30
+        x_mode = max(modes, key=lambda mode: abs(mode["shape"]["table.x"]))
+        assert x_mode["frequency"] == pytest.approx(np.sqrt(2.0e6 / 3.0) / (2 * np.pi), rel=1e-4)  # zeta^2 ~ 4e-5
+        assert x_mode["damping"] == pytest.approx(30.0 / (2 * np.sqrt(2.0e6 * 3.0)), rel=1e-6)
+
+
 def _oscillators(omegas, zeta=0.02):
     """State space of uncoupled unit-mass oscillators, x = [q, q'] (a stand-in with a .A/.B/.C interface)."""
     from types import SimpleNamespace
