@@ -9,7 +9,7 @@ import pytest
 
 from cappe.exceptions import ModelError
 from cappe.modal import ModalEngine, modal_batch
-from cappe.model import NumericModel, StructureBuilder
+from cappe.model import NumericModel, StructureBuilder, load_model
 
 
 def random_params(model: NumericModel, n: int, seed: int, spread: float = 0.3) -> np.ndarray:
@@ -318,3 +318,9 @@ def test_samples_sharing_a_stiffness_share_one_eigen_solve_and_keep_their_bits(s
             got = getattr(batch, name)
             if got is not None:
                 np.testing.assert_array_equal(got[k:k + 1], getattr(alone, name), err_msg=f"{name} of sample {k}")
+
+
+def test_empty_sensor_list_is_a_model_error():
+    # `--sensors ""` reached the engine as [] and ended in a reshape ValueError traceback
+    with pytest.raises(ModelError, match=r"list of sensor channels for model 'two-mass-rig' is empty"):
+        ModalEngine(load_model("builtin:two-mass-rig"), sensors=[])

@@ -128,6 +128,9 @@ class ModalEngine:
         self.chunk_size = chunk_size
         self.n_workers = n_workers
         self.executor = executor
+        if sensors is not None and not isinstance(sensors, str) and not list(sensors):
+            msg = f"the list of sensor channels for model '{self.model.structure.name}' is empty; name at least one"
+            raise ModelError(msg)
         self._sensor_request = sensors
         self._sensor_cache: dict[tuple[float, ...], tuple[tuple[str, ...], Array]] = {}
         self._group_cache: dict[tuple[float, ...], list[NDArray[np.intp]]] = {}
