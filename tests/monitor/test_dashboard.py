@@ -383,7 +383,11 @@ def test_non_loopback_bind_answers_to_its_address_only(store: HistoryStore) -> N
 
 def test_wildcard_bind_answers_to_loopback_and_configured_names(store: HistoryStore) -> None:
     with make_server(store, host="0.0.0.0", allowed_hosts=["spindle-pc"]) as server:
-        assert server.allowed_hosts == ("localhost", "127.0.0.1", "::1", "spindle-pc")
+        server.start()
+        assert server.allowed_hosts == ("localhost", "127.0.0.1", "::1", "0.0.0.0", "spindle-pc")
+        for host in ("spindle-pc", f"localhost:{server.port}", f"0.0.0.0:{server.port}"):  # 0.0.0.0: its url
+            assert _raw(server, "GET", "/api/machines", [host])[0] == 200, host
+        assert _raw(server, "GET", "/api/machines", ["attacker.example"])[0] == 421
 
 
 @pytest.mark.parametrize("bad", ["", "http://dashboard.example.org", "dashboard.example.org:8050", "a/b", "a b",

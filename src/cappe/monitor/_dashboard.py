@@ -21,9 +21,9 @@ ingest shows on the next reload:
 ==========================================  =========================================================================
 
 Every request must name the server in its ``Host`` header (DNS rebinding: a page of another site whose name
-resolves to this computer would otherwise read the store and acknowledge alarms): on a loopback interface
-``localhost``, ``127.0.0.1`` or ``[::1]``, on another interface the address it listens on, and any name given in
-``allowed_hosts``, each with the served port or without one. Other hosts, and requests without exactly one
+resolves to this computer would otherwise read the store and acknowledge alarms): the address it listens on, on a
+loopback or wildcard (``0.0.0.0``) interface also ``localhost``, ``127.0.0.1`` and ``[::1]``, and any name given
+in ``allowed_hosts``, each with the served port or without one. Other hosts, and requests without exactly one
 ``Host`` header, are answered 421 with a short plain-text message, whatever the method and path.
 Unknown machines, alarms and paths answer 404, failures inside the server 500, both as ``{"error": message}``.
 Numbers that are not finite are sent as ``null``. Store access is serialized by a lock, so a store whose
@@ -118,8 +118,8 @@ def _host_name(text: str) -> str | None:
 def _served_names(host: str, bound: str, allowed: Sequence[str]) -> tuple[str, ...]:
     """Host names a server bound to ``bound`` (asked for as ``host``) answers to, besides ``allowed``.
 
-    Loopback and wildcard (``0.0.0.0``, ``::``) binds answer to the loopback names; a bind to one address answers
-    to that address and to the name it was asked for by.
+    Every bind answers to its address and to the name it was asked for by; loopback and wildcard (``0.0.0.0``,
+    ``::``) binds also to the loopback names.
     """
     names: list[str] = []
     for text in (host, bound):
@@ -133,8 +133,7 @@ def _served_names(host: str, bound: str, allowed: Sequence[str]) -> tuple[str, .
             continue
         if address.is_loopback or address.is_unspecified:
             names += _LOOPBACK_NAMES
-        if not address.is_unspecified:
-            names.append(name)
+        names.append(name)  # also 0.0.0.0: the server's url, which some browsers take for this computer
     names += allowed
     return tuple(dict.fromkeys(names))
 
@@ -801,9 +800,9 @@ def make_server(
         TCP port in 0 ... 65535; 0 lets the system choose a free one (see ``DashboardServer.url``).
     allowed_hosts : sequence of str, optional
         Further names (or addresses) the server answers to in a request's ``Host`` header, e.g. the computer's
-        network name for a deliberate bind to ``0.0.0.0``. Without them it answers to ``localhost``,
-        ``127.0.0.1`` and ``[::1]`` on a loopback or wildcard interface and to the address it listens on
-        otherwise; requests naming another host (a DNS-rebinding page) are refused with 421.
+        network name for a deliberate bind to ``0.0.0.0``. Without them it answers to the address it listens
+        on and, on a loopback or wildcard interface, to ``localhost``, ``127.0.0.1`` and ``[::1]``; requests
+        naming another host (a DNS-rebinding page) are refused with 421.
 
     Returns
     -------
