@@ -86,7 +86,7 @@ sensors:
     ("argv", "code", "message"),
     [
         (["--sobol"], 2, "--sobol needs --reference FILE.json"),
-        (["--sobol", "--reference", "missing.json"], 1, "cannot read modal data missing.json"),
+        (["--sobol", "--reference", "missing.json"], 1, "cannot read modal data file missing.json: no such file"),
         (["--local", "--percent", "200"], 1, r"percent must lie in (0, 100); got 200"),
         (["--local", "--parameters", "k99"], 1, "unknown parameter 'k99'"),
     ],
@@ -108,4 +108,4 @@ def test_reference_with_unknown_sensors_is_an_error(capsys, tmp_path):
                                "sets": [{"frequency": [90.0, 100.0], "damping": [0.01], "shape_re": [[1.0]]}]}))
     code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "8")
     assert code == 1
-    assert "sets[0].damping must be 2 numbers" in err
+    assert "sets[0].damping must list 2 number(s); got 1" in err

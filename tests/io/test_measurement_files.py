@@ -16,6 +16,7 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from cappe.exceptions import DataError
+from cappe.io import measurements
 from cappe.io.measurements import (
     match_channels,
     read_frf,
@@ -229,7 +230,10 @@ def test_read_measurements_dispatch_errors(tmp_path):
     ("time,a\n0,1\n0.1,x1\n", r"bad\.csv, line 3, column 2 \('a'\): 'x1' is not a number"),
     ("# c\ntime,a,b\n0,1,2\n0.1,2\n", r"bad\.csv, line 4: 2 cell\(s\); the header \(line 2\) has 3"),
     ("time,a\n0,1\n0,2\n", r"bad\.csv: time stamps must increase strictly; sample 1"),
-    ("time,a\n0,1\n1,nan\n", r"bad\.csv: channel 'a' has 1 non-finite value"),
+    ("time,a\n0,1\n1,nan\n", r"bad\.csv, line 3, column 2 \('a'\): 'nan' is not a finite number"),
+    ("time,a\n0,1\n1,1e400\n", r"bad\.csv, line 3, column 2 \('a'\): '1e400' is not a finite number"),
+    ("time,a\n0,1\n1," + "9" * 5000 + "\n", r"bad\.csv, line 3, column 2 \('a'\): '9+\.\.\. is not a finite number$"),
+    ("time,a\n0,1\n1,x" + "9" * 5000 + "\n", r"bad\.csv, line 3, column 2 \('a'\): 'x9+\.\.\. is not a number$"),
     ("time,a,a\n0,1,2\n1,2,3\n", r"bad\.csv: channel names must be unique; repeated: \['a'\]"),
     ("t,a\n0,1\n", r"bad\.csv, line 1: the first column of time data must be 'time' or 'time \[s\]'; got 't'"),
 ])
@@ -249,10 +253,16 @@ def test_time_csv_errors(tmp_path, text, pattern):
     ("frequency,aF re\n1,2\n", r"line 1, column 2: 'aF re' must read '<output>/<input> re\|im\|coh'"),
     ("frequency,a/F real\n1,2\n", r"column 2: 'a/F real' must read"),
     ("frequency,a/F re,a/F re\n1,2,3\n", r"line 1: column 3 repeats 'a/F re' \(column 2\)"),
-    ("frequency,a/F re,a/F im\n1,2,inf\n", r"bad\.csv, line 2, column 3 \('a/F im'\): inf is not finite"),
-    ("# window_decay: fast\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: the value of comment 'window_decay' must be JSON; got 'fast'"),
-    ("# window_decay: \"1\"\nfrequency,a/F re,a/F im\n1,2,3\n", r"line 1: window_decay must be a number \(s\) or null; got '1'"),
+    ("frequency,a/F re,a/F im\n1,2,inf\n", r"bad\.csv, line 2, column 3 \('a/F im'\): 'inf' is not a finite number"),
+    ("# window_decay: fast\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: the value of comment 'window_decay' is not valid JSON: Expecting value at column 1$"),
+    ("# window_decay: \"1\"\nfrequency,a/F re,a/F im\n1,2,3\n", r"line 1: window_decay must be a finite number \(s\) or null; got '1'"),
     ("# window_decay: -2\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv: FRF window_decay must be None or a time constant > 0 in s; got -2.0"),
+    ("# window_decay: " + "[" * 100_000 + "\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: the value of comment 'window_decay' nests arrays or objects too deeply to be read"),
+    ("# window_decay: 1" + "0" * 400 + "\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: window_decay must be a finite number \(s\) or null; got 100000\.\.\.000 \(401 digits\)"),
+    ("# window_decay: 1" + "0" * 5000 + "\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: window_decay must be a finite number \(s\) or null; got 100000\.\.\.000 \(5001 digits\)"),
+    ("# window_decay: NaN\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: window_decay must be a finite number \(s\) or null; got nan"),
+    ("# window_decay:\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: the value of comment 'window_decay' is empty; expected JSON"),
+    ("# output_quantities: [\"velocity\"\nfrequency,a/F re,a/F im\n1,2,3\n", r"bad\.csv, line 1: the value of comment 'output_quantities' is not valid JSON"),
     ("# output_quantities: [\"velocity\"]\nfrequency,a/F re,a/F im,b/F re,b/F im\n1,2,3,4,5\n", r"line 1: output_quantities must list 2 strings \(one per output\); got \['velocity'\]"),
     ("frequency,\"\"\"a/F re\"\n1,2\n", r"column 2: '\"a/F re' must read"),
     ("time,a\n0,1\n", r"bad\.csv, line 1: the first column of FRF data must be 'frequency' or 'frequency \[Hz\]'; got 'time'"),
@@ -318,6 +328,39 @@ def test_failed_npz_write_leaves_no_file(tmp_path, monkeypatch):
     with pytest.raises(OSError, match="disk full"):
         write_time_data(tmp_path / "run.npz", TimeData.from_rate(10.0, {"a": [1.0, 2.0]}))
     assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize(("arrays", "pattern"), [
+    ({"freq": np.array(["1", "2"]), "H": np.ones((1, 1, 2))}, r"array 'freq' in .*bad\.npz must hold numbers; got dtype <U1"),
+    ({"freq": np.ones(2), "H": np.array([[["a", "b"]]])}, r"array 'H' in .*bad\.npz must hold numbers; got dtype <U1"),
+    ({"freq": np.ones(2), "H": np.ones((1, 1, 2)), "window_decay": np.ones(2)},
+     r"array 'window_decay' in .*bad\.npz must be one number \(s, NaN for none\); got shape \(2,\)"),
+    ({"freq": np.ones(2), "H": np.ones((1, 1, 2)), "window_decay": np.array("x")},
+     r"array 'window_decay' in .*bad\.npz must hold numbers; got dtype <U1"),
+    ({"freq": np.ones(2), "H": np.ones((1, 1, 2)), "coherence": np.array([[["a", "b"]]])},
+     r"array 'coherence' in .*bad\.npz must hold numbers; got dtype <U1"),
+])
+def test_frf_npz_with_wrong_types(tmp_path, arrays, pattern):
+    path = tmp_path / "bad.npz"
+    np.savez(path, input_names=np.array(["F"]), output_names=np.array(["a"]), **arrays)
+    with pytest.raises(DataError, match=pattern):
+        read_frf(path)
+
+
+def test_time_npz_with_wrong_types(tmp_path):
+    path = tmp_path / "bad.npz"
+    np.savez(path, time=np.arange(3.0), values=np.array([["a", "b", "c"]]), channels=np.array(["a"]))
+    with pytest.raises(DataError, match=r"array 'values' in .*bad\.npz must hold numbers; got dtype <U1"):
+        read_time_data(path)
+
+
+def test_csv_size_limit_and_byte_order_mark(tmp_path, monkeypatch):
+    path = tmp_path / "run.csv"
+    path.write_bytes(b"\xef\xbb\xbftime,a\n0,1\n1,2\n")
+    assert read_time_data(path).channels == ("a",)  # a spreadsheet's UTF-8 byte order mark is not part of the header
+    monkeypatch.setattr(measurements, "MAX_CSV_BYTES", 16)
+    with pytest.raises(DataError, match=r"CSV measurement file .*run\.csv is larger than 16 bytes, the most cappe reads"):
+        read_time_data(path)
 
 
 # --------------------------------------------------------------------------------------------- channel match

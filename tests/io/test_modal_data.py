@@ -41,11 +41,26 @@ def good():
         (lambda d: d.update(sets=[]), r"sets must be a non-empty list"),
         (lambda d: d["sets"][0].update(frequency=[-1.0]), r"sets\[0\].frequency must be > 0 Hz"),
         (lambda d: d["sets"][0].update(damping=[1.5]), r"sets\[0\].damping ratios must lie in \[0, 1\)"),
-        (lambda d: d["sets"][0].update(damping=[0.1, 0.2]), r"sets\[0\].damping must be 1 numbers; got shape \(2,\)"),
-        (lambda d: d["sets"][0].update(shape_re=[[1.0]]), r"sets\[0\].shape_re\[0\] must be 2 numbers"),
-        (lambda d: d["sets"][0].update(shape_re=[[1.0, "x"]]), r"sets\[0\].shape_re\[0\] must be a list of numbers"),
+        (lambda d: d["sets"][0].update(damping=[0.1, 0.2]), r"sets\[0\].damping must list 1 number\(s\); got 2 \(f.json, sets\[0\].damping\)"),
+        (lambda d: d["sets"][0].update(shape_re=[[1.0]]), r"sets\[0\].shape_re\[0\] must list 2 number\(s\); got 1"),
+        (lambda d: d["sets"][0].update(shape_re=[[1.0, "x"]]), r"sets\[0\].shape_re\[0\]\[1\] must be a finite number; got 'x' \(f.json, sets\[0\].shape_re\[0\]\[1\]\)"),
         (lambda d: d["sets"][0].update(shape_im=[]), r"sets\[0\].shape_im must list one shape per mode \(1\)"),
-        (lambda d: d["sets"][0].update(frequency=[float("nan")]), r"sets\[0\].frequency contains NaN or Inf"),
+        (lambda d: d["sets"][0].update(frequency=[float("nan")]), r"sets\[0\].frequency\[0\] must be a finite number; got nan"),
+        (lambda d: d["sets"][0].update(frequency=["10"]), r"sets\[0\].frequency\[0\] must be a finite number; got '10'"),
+        (lambda d: d["sets"][0].update(frequency=[[10.0]]), r"sets\[0\].frequency\[0\] must be a finite number; got \[10.0\]"),
+        (lambda d: d["sets"][0].update(frequency={"a": 10.0}), r"sets\[0\].frequency must be a list of numbers; got dict \(f.json, sets\[0\].frequency\)"),
+        (lambda d: d["sets"][0].update(frequency=10.0), r"sets\[0\].frequency must be a list of numbers; got float"),
+        (lambda d: d["sets"][0].update(frequency="10"), r"sets\[0\].frequency must be a list of numbers; got str"),
+        (lambda d: d["sets"][0].update(frequency=[]), r"sets\[0\].frequency must list at least one mode"),
+        (lambda d: d["sets"][0].pop("frequency"), r"sets\[0\].frequency is missing \(f.json, sets\[0\]\)"),
+        (lambda d: d["sets"][0].pop("damping"), r"sets\[0\].damping is missing"),
+        (lambda d: d["sets"][0].update(damping=[True]), r"sets\[0\].damping\[0\] must be a finite number; got True"),
+        (lambda d: d["sets"][0].update(position={"z": "0.1"}), r"sets\[0\].position.z must be a finite number; got '0.1'"),
+        (lambda d: d["sets"][0].update(position={"z": None}), r"sets\[0\].position.z must be a finite number; got None"),
+        (lambda d: d["sets"][0].update(shape_re={"a": 1}), r"sets\[0\].shape_re must list one shape per mode \(1\)"),
+        (lambda d: d["sets"][0].update(shape_re=["ab"]), r"sets\[0\].shape_re\[0\] must be a list of numbers; got str"),
+        (lambda d: d.update(format="x" * 10_000), r"got 'x+\.\.\. \(f.json, format\)$"),
+        (lambda d: d.update(sensors=["a:x", 3]), r"sensors must be a non-empty list of channel labels"),
         (lambda d: d["sets"][0].update(position=[1]), r"sets\[0\].position must be a mapping"),
     ],
 )
@@ -61,7 +76,39 @@ def test_read_errors(tmp_path):
         read_modal_data(tmp_path / "none.json")
     bad = tmp_path / "bad.json"
     bad.write_text("{")
-    with pytest.raises(DataError, match=r"is not valid JSON: .* \(line 1\)"):
+    with pytest.raises(DataError, match=r"modal data file .*bad\.json is not valid JSON: Expecting property name enclosed in double quotes at column 2$"):
         read_modal_data(bad)
     bad.write_text(json.dumps(good()))
     assert read_modal_data(bad).sets[0].n_modes == 1
+
+
+BIG = "1" + "0" * 400  # 10**400: Python reads the int, float() overflows
+HUGE = "1" + "0" * 5000  # more digits than int(str) accepts (sys.get_int_max_str_digits() is 4300)
+
+
+@pytest.mark.parametrize(("content", "pattern"), [
+    (json.dumps(good()).replace("10.0", BIG).encode(),
+     r"sets\[0\].frequency\[0\] must be a finite number; got 100000\.\.\.000 \(401 digits\) \(.*m\.json, sets\[0\].frequency\[0\]\)"),
+    (json.dumps(good()).replace("10.0", HUGE).encode(), r"sets\[0\].frequency\[0\] must be a finite number; got 100000\.\.\.000 \(5001 digits\)"),
+    (json.dumps(good()).replace("0.5", "-" + BIG).encode(), r"sets\[0\].shape_re\[0\]\[1\] must be a finite number; got -100000\.\.\.000"),
+    (json.dumps(good()).replace("0.1", HUGE).encode(), r"sets\[0\].position.z must be a finite number; got 100000\.\.\.000 \(5001 digits\)"),
+    (json.dumps(good()).replace("0.01", "Infinity").encode(), r"sets\[0\].damping\[0\] must be a finite number; got inf"),
+    (json.dumps(good()).replace("a:x", "\\u00e9").encode().replace(b"\\u00e9", b"\xe9"),
+     r"modal data file .*m\.json is not a UTF-8 text file \(JSON expected\): invalid continuation byte at byte \d+"),
+    (b"[" * 100_000, r"modal data file .*m\.json nests arrays or objects too deeply to be read"),
+    (b'{"sets": ' + b"[" * 3000 + b"]" * 3000 + b"}", r"modal data file .*m\.json nests arrays or objects too deeply to be read"),
+    (b"", r"modal data file .*m\.json is empty; expected JSON"),
+    (b"[]", r"modal data must have \"format\": \"cappe.modal/1\"; got 'list'"),
+])
+def test_bad_modal_files_name_the_file_and_entry(tmp_path, content, pattern):
+    path = tmp_path / "m.json"
+    path.write_bytes(content)
+    with pytest.raises(DataError, match=pattern) as info:
+        read_modal_data(path)
+    assert "\n" not in str(info.value)
+
+
+def test_modal_file_with_byte_order_mark(tmp_path):
+    path = tmp_path / "m.json"
+    path.write_bytes(b"\xef\xbb\xbf" + json.dumps(good()).encode())
+    assert read_modal_data(path).sensors == ("a:x", "b:x")

@@ -23,6 +23,9 @@ Formats
     ``channels``, ``units``. FRFs: ``format = "cappe.frf/1"``, ``freq``, ``H`` (n_out, n_in, n_freq),
     ``input_names``, ``output_names``, ``output_quantities``, ``window_decay`` (NaN for None) and, when known,
     ``coherence``. Exact.
+
+Reading is bounded: a CSV file larger than ``MAX_CSV_BYTES`` (1 GiB) is refused (store long recordings as npz or
+binary UFF), and every error names the file and the place (line and column, array, comment).
 """
 
 from __future__ import annotations
@@ -35,13 +38,13 @@ import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import numpy as np
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
-from cappe.io.files import atomic_path, write_text
+from cappe.io.files import atomic_path, finite_number, parse_json, read_text_file, shown, write_text
 from cappe.io.timedata import TimeData
 from cappe.io.uff import (
     COHERENCE,
@@ -78,6 +81,8 @@ _UNIT = re.compile(r"^(?P<name>.*) \[(?P<unit>[^\[\]]*)\]$")
 _TIME_HEADER = re.compile(r"^time( \[s\])?$", re.IGNORECASE)
 _FREQ_HEADER = re.compile(r"^freq(uency)?( \[Hz\])?$", re.IGNORECASE)
 _PARTS = ("re", "im", "coh")
+#: The largest CSV file read (bytes); longer recordings belong in .npz or binary UFF, which read faster and exactly.
+MAX_CSV_BYTES = 1024 * 2**20
 
 
 def _format(path: Path, fmt: str | None) -> str:
@@ -296,7 +301,7 @@ def read_measurements(path: str | Path, *, format: str | None = None) -> TimeDat
             return _frf_from_table(table)
         msg = (
             f"{p}, line {table.header_line}: the first column must be 'time' (time data) or 'frequency' (FRFs); "
-            f"got {table.header[0]!r}"
+            f"got {shown(table.header[0])}"
         )
         raise DataError(msg)
     arrays = _load_npz(p)
@@ -380,17 +385,7 @@ class _Table:
 
 
 def _read_table(p: Path) -> _Table:
-    try:
-        text = p.read_text(encoding="utf-8")
-    except FileNotFoundError as exc:
-        msg = f"cannot read {p}: no such file"
-        raise DataError(msg) from exc
-    except UnicodeDecodeError as exc:
-        msg = f"{p} is not a UTF-8 text file (CSV expected): {exc.reason} at byte {exc.start}"
-        raise DataError(msg) from exc
-    except OSError as exc:
-        msg = f"cannot read {p}: {exc.strerror or exc}"
-        raise DataError(msg) from exc
+    text = read_text_file(p, "CSV measurement file", "CSV", max_bytes=MAX_CSV_BYTES)
     if not text.strip():
         msg = f"{p} is empty; expected a CSV header row ('time,...' or 'frequency,...') and data rows"
         raise DataError(msg)
@@ -433,22 +428,33 @@ def _read_table(p: Path) -> _Table:
     try:
         values = np.array(cells, dtype=float)
     except ValueError:
-        for row, line in zip(cells, row_lines, strict=True):
-            for j, cell in enumerate(row):
-                try:
-                    float(cell)
-                except ValueError:
-                    msg = f"{p}, line {line}, column {j + 1} ({header[j]!r}): {cell!r} is not a number"
-                    raise DataError(msg) from None
-        raise  # pragma: no cover - numpy and float() agree on what a number is
+        values = None  # a cell that is not a number, found below
+    if values is None or not np.all(np.isfinite(values)):
+        _bad_cell(p, header, cells, row_lines)
     return _Table(p, header, header_line, row_lines, values, meta)
+
+
+def _bad_cell(p: Path, header: list[str], cells: list[list[str]], lines: list[int]) -> NoReturn:
+    """Raise for the first cell that is not a finite number, naming its line, column and text."""
+    for row, line in zip(cells, lines, strict=True):
+        for j, cell in enumerate(row):
+            try:
+                number = float(cell)  # what numpy uses for strings
+            except ValueError:
+                msg = f"{p}, line {line}, column {j + 1} ({shown(header[j])}): {shown(cell)} is not a number"
+                raise DataError(msg) from None
+            if not np.isfinite(number):  # 'nan', 'inf', '1e400' or more digits than a float holds
+                msg = f"{p}, line {line}, column {j + 1} ({shown(header[j])}): {shown(cell)} is not a finite number"
+                raise DataError(msg)
+    msg = f"{p}: the data rows hold a cell that is not a finite number"  # pragma: no cover - float() found none
+    raise DataError(msg)  # pragma: no cover
 
 
 def _check_first_column(table: _Table, header: re.Pattern[str], what: str, allowed: str) -> None:
     if not header.match(table.header[0].strip()):
         msg = (
             f"{table.path}, line {table.header_line}: the first column of {what} must be {allowed}; "
-            f"got {table.header[0]!r}"
+            f"got {shown(table.header[0])}"
         )
         raise DataError(msg)
 
@@ -500,11 +506,11 @@ def _frf_from_table(table: _Table) -> FRFData:
         pair_text, _, part = cell.rpartition(" ")
         pair = _split_pair(pair_text) if part in _PARTS else None
         if pair is None:
-            msg = f"{p}, line {table.header_line}, column {j + 1}: {cell!r} must read '<output>/<input> re|im|coh'"
+            msg = f"{p}, line {table.header_line}, column {j + 1}: {shown(cell)} must read '<output>/<input> re|im|coh'"
             raise DataError(msg)
         parts = columns.setdefault(pair, {})
         if part in parts:
-            msg = f"{p}, line {table.header_line}: column {j + 1} repeats {cell!r} (column {parts[part] + 1})"
+            msg = f"{p}, line {table.header_line}: column {j + 1} repeats {shown(cell)} (column {parts[part] + 1})"
             raise DataError(msg)
         parts[part] = j
     with_coherence = [pair for pair, parts in columns.items() if "coh" in parts]
@@ -532,11 +538,6 @@ def _frf_from_table(table: _Table) -> FRFData:
         lacking = [f"{o}/{i}" for (o, i) in columns if (o, i) not in with_coherence]
         msg = f"{p}: coherence columns are given for some FRFs but not for {lacking}"
         raise DataError(msg)
-    bad = np.argwhere(~np.isfinite(table.values))
-    if bad.size:
-        r, j = bad[0]
-        msg = f"{p}, line {table.lines[r]}, column {j + 1} ({table.header[j]!r}): {table.values[r, j]} is not finite"
-        raise DataError(msg)
     v = table.values
     n_f = v.shape[0]
     H = np.empty((len(outputs), len(inputs), n_f), dtype=complex)
@@ -558,22 +559,19 @@ def _frf_from_table(table: _Table) -> FRFData:
 
 def _meta_json(table: _Table, key: str) -> Any:
     line, raw = table.meta[key]
-    try:
-        return json.loads(raw)
-    except json.JSONDecodeError as exc:
-        msg = f"{table.path}, line {line}: the value of comment '{key}' must be JSON; got {raw!r}"
-        raise DataError(msg) from exc
+    return parse_json(raw, f"{table.path}, line {line}: the value of comment '{key}'")
 
 
 def _meta_decay(table: _Table) -> float | None:
     if "window_decay" not in table.meta:
         return None
     value = _meta_json(table, "window_decay")
-    if value is not None and (isinstance(value, bool) or not isinstance(value, (int, float))):
+    number = finite_number(value)
+    if value is not None and number is None:
         line = table.meta["window_decay"][0]
-        msg = f"{table.path}, line {line}: window_decay must be a number (s) or null; got {value!r}"
+        msg = f"{table.path}, line {line}: window_decay must be a finite number (s) or null; got {shown(value)}"
         raise DataError(msg)
-    return None if value is None else float(value)
+    return number
 
 
 def _meta_quantities(table: _Table, n_out: int) -> tuple[str, ...]:
@@ -582,7 +580,10 @@ def _meta_quantities(table: _Table, n_out: int) -> tuple[str, ...]:
     value = _meta_json(table, "output_quantities")
     if not isinstance(value, list) or len(value) != n_out or not all(isinstance(q, str) for q in value):
         line = table.meta["output_quantities"][0]
-        msg = f"{table.path}, line {line}: output_quantities must list {n_out} strings (one per output); got {value!r}"
+        msg = (
+            f"{table.path}, line {line}: output_quantities must list {n_out} strings (one per output); "
+            f"got {shown(value)}"
+        )
         raise DataError(msg)
     return tuple(value)
 
@@ -622,6 +623,15 @@ def _npz_names(p: Path, arrays: dict[str, NDArray[Any]], key: str, kind: str) ->
     return tuple(str(v) for v in value)
 
 
+def _npz_numbers(p: Path, arrays: dict[str, NDArray[Any]], key: str, kind: str, dtype: type) -> NDArray[Any]:
+    value = _npz_array(p, arrays, key, kind)
+    allowed = "biufc" if dtype is complex else "biuf"
+    if value.dtype.kind not in allowed:
+        msg = f"array {key!r} in {p} must hold numbers; got dtype {value.dtype}"
+        raise DataError(msg)
+    return np.asarray(value, dtype=dtype)
+
+
 def _check_npz_format(p: Path, arrays: dict[str, NDArray[Any]], expected: str) -> None:
     if "format" in arrays and str(arrays["format"]) != expected:
         msg = f"{p} has format {str(arrays['format'])!r}; expected {expected!r}"
@@ -631,8 +641,8 @@ def _check_npz_format(p: Path, arrays: dict[str, NDArray[Any]], expected: str) -
 def _time_from_npz(p: Path, arrays: dict[str, NDArray[Any]]) -> TimeData:
     kind = "time data"
     _check_npz_format(p, arrays, TIME_NPZ_FORMAT)
-    time = _npz_array(p, arrays, "time", kind)
-    values = _npz_array(p, arrays, "values", kind)
+    time = _npz_numbers(p, arrays, "time", kind, float)
+    values = _npz_numbers(p, arrays, "values", kind, float)
     channels = _npz_names(p, arrays, "channels", kind)
     units = _npz_names(p, arrays, "units", kind) if "units" in arrays else ()
     try:
@@ -644,15 +654,18 @@ def _time_from_npz(p: Path, arrays: dict[str, NDArray[Any]]) -> TimeData:
 def _frf_from_npz(p: Path, arrays: dict[str, NDArray[Any]]) -> FRFData:
     kind = "FRF data"
     _check_npz_format(p, arrays, FRF_NPZ_FORMAT)
-    decay = float(arrays["window_decay"]) if "window_decay" in arrays else float("nan")
+    decay = _npz_numbers(p, arrays, "window_decay", kind, float) if "window_decay" in arrays else np.array(np.nan)
+    if decay.size != 1:
+        msg = f"array 'window_decay' in {p} must be one number (s, NaN for none); got shape {decay.shape}"
+        raise DataError(msg)
     fields: dict[str, Any] = {
-        "freq": np.asarray(_npz_array(p, arrays, "freq", kind), dtype=float),
-        "H": np.asarray(_npz_array(p, arrays, "H", kind), dtype=complex),
+        "freq": _npz_numbers(p, arrays, "freq", kind, float),
+        "H": _npz_numbers(p, arrays, "H", kind, complex),
         "input_names": _npz_names(p, arrays, "input_names", kind),
         "output_names": _npz_names(p, arrays, "output_names", kind),
         "output_quantities": _npz_names(p, arrays, "output_quantities", kind) if "output_quantities" in arrays else (),
-        "coherence": np.asarray(arrays["coherence"], dtype=float) if "coherence" in arrays else None,
-        "window_decay": None if np.isnan(decay) else decay,
+        "coherence": _npz_numbers(p, arrays, "coherence", kind, float) if "coherence" in arrays else None,
+        "window_decay": None if np.isnan(decay.item()) else float(decay.item()),
     }
     try:
         frf = FRFData(**fields)

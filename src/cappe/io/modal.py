@@ -12,7 +12,6 @@
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -22,7 +21,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
-from cappe.io.files import write_json
+from cappe.io.files import finite_number, read_json, shown, write_json
 
 __all__ = [
     "MODAL_FORMAT",
@@ -102,27 +101,38 @@ def _where(source: str, entry: str) -> str:
     return f"({source}, {entry})" if source else f"({entry})"
 
 
+def _number(value: object, what: str, source: str) -> float:
+    number = finite_number(value)
+    if number is None:
+        msg = f"{what} must be a finite number; got {shown(value)} {_where(source, what)}"
+        raise DataError(msg)
+    return number
+
+
 def _numbers(value: object, what: str, source: str, *, length: int | None = None) -> NDArray[np.float64]:
-    try:
-        arr = np.asarray(value, dtype=float)
-    except (TypeError, ValueError) as exc:
-        msg = f"{what} must be a list of numbers {_where(source, what)}"
-        raise DataError(msg) from exc
-    if arr.ndim != 1 or (length is not None and arr.size != length):
-        expected = f"{length} numbers" if length is not None else "a flat list of numbers"
-        msg = f"{what} must be {expected}; got shape {arr.shape} {_where(source, what)}"
+    if isinstance(value, np.ndarray) and value.ndim == 1:
+        value = value.tolist()
+    if isinstance(value, (str, bytes)) or not isinstance(value, Sequence):
+        msg = f"{what} must be a list of numbers; got {type(value).__name__} {_where(source, what)}"
         raise DataError(msg)
-    if not np.all(np.isfinite(arr)):
-        msg = f"{what} contains NaN or Inf {_where(source, what)}"
+    if length is not None and len(value) != length:
+        msg = f"{what} must list {length} number(s); got {len(value)} {_where(source, what)}"
         raise DataError(msg)
-    return arr
+    return np.array([_number(v, f"{what}[{k}]", source) for k, v in enumerate(value)], dtype=float)
+
+
+def _required(raw: Mapping[str, Any], key: str, entry: str, source: str) -> Any:
+    if raw.get(key) is None:
+        msg = f"{entry}.{key} is missing {_where(source, entry)}"
+        raise DataError(msg)
+    return raw[key]
 
 
 def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalData:
-    """Validate a parsed ``cappe.modal/1`` document."""
+    """Validate a parsed ``cappe.modal/1`` document; every error names ``source`` and the entry."""
     if not isinstance(data, Mapping) or data.get("format") != MODAL_FORMAT:
         got = data.get("format") if isinstance(data, Mapping) else type(data).__name__
-        msg = f"modal data must have \"format\": \"{MODAL_FORMAT}\"; got {got!r} {_where(source, 'format')}"
+        msg = f"modal data must have \"format\": \"{MODAL_FORMAT}\"; got {shown(got)} {_where(source, 'format')}"
         raise DataError(msg)
     sensors = data.get("sensors")
     if not isinstance(sensors, Sequence) or isinstance(sensors, str) or not sensors or \
@@ -147,13 +157,16 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
         if not isinstance(position, Mapping):
             msg = f"{entry}.position must be a mapping axis -> value {_where(source, entry)}"
             raise DataError(msg)
-        pos = {str(a): float(_numbers([v], f"{entry}.position.{a}", source)[0]) for a, v in position.items()}
-        freq = _numbers(raw.get("frequency"), f"{entry}.frequency", source)
+        pos = {str(a): _number(v, f"{entry}.position.{a}", source) for a, v in position.items()}
+        freq = _numbers(_required(raw, "frequency", entry, source), f"{entry}.frequency", source)
         m = freq.size
+        if m == 0:
+            msg = f"{entry}.frequency must list at least one mode {_where(source, entry)}"
+            raise DataError(msg)
         if np.any(freq <= 0):
             msg = f"{entry}.frequency must be > 0 Hz {_where(source, entry)}"
             raise DataError(msg)
-        damping = _numbers(raw.get("damping"), f"{entry}.damping", source, length=m)
+        damping = _numbers(_required(raw, "damping", entry, source), f"{entry}.damping", source, length=m)
         if np.any(damping < 0) or np.any(damping >= 1):
             msg = f"{entry}.damping ratios must lie in [0, 1) {_where(source, entry)}"
             raise DataError(msg)
@@ -162,7 +175,7 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
             rows = raw.get(name)
             if rows is None and name == "shape_im":
                 continue
-            if not isinstance(rows, Sequence) or len(rows) != m:
+            if isinstance(rows, (str, bytes)) or not isinstance(rows, Sequence) or len(rows) != m:
                 msg = f"{entry}.{name} must list one shape per mode ({m}) {_where(source, entry)}"
                 raise DataError(msg)
             for r, row in enumerate(rows):
@@ -172,19 +185,16 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
 
 
 def read_modal_data(path: str | Path) -> ModalData:
-    """Read and validate a ``cappe.modal/1`` JSON file."""
+    """Read and validate a ``cappe.modal/1`` JSON file.
+
+    Raises
+    ------
+    DataError
+        When the file cannot be read or parsed (:func:`cappe.io.files.read_json`) or breaks a rule of the format;
+        the message names the file and the entry (``sets[2].frequency[0]``).
+    """
     p = Path(path)
-    try:
-        text = p.read_text()
-    except OSError as exc:
-        msg = f"cannot read modal data {p}: {exc.strerror or exc}"
-        raise DataError(msg) from exc
-    try:
-        data = json.loads(text)
-    except json.JSONDecodeError as exc:
-        msg = f"{p} is not valid JSON: {exc.msg} (line {exc.lineno})"
-        raise DataError(msg) from exc
-    return modal_data_from_mapping(data, str(p))
+    return modal_data_from_mapping(read_json(p, "modal data file"), str(p))
 
 
 def write_modal_data(path: str | Path, data: ModalData) -> None:
