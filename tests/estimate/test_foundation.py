@@ -131,8 +131,14 @@ def test_result_round_trip_and_nulls(tmp_path):
     (tmp_path / "bad.json").write_text('{"format": "cappe.modal/1"}')
     with pytest.raises(DataError, match=r"bad.json: format must be 'cappe.estimate/1'; got 'cappe.modal/1'"):
         read_estimate(tmp_path / "bad.json")
-    with pytest.raises(DataError, match=r"no such estimate file"):
+    with pytest.raises(DataError, match=r"cannot read estimate file .*none\.json: no such file"):
         read_estimate(tmp_path / "none.json")
+    (tmp_path / "bad.json").write_text("[1]")
+    with pytest.raises(DataError, match=r"bad\.json: an estimate file must hold a JSON object; got list"):
+        read_estimate(tmp_path / "bad.json")
+    (tmp_path / "bad.json").write_text("[" * 100_000)
+    with pytest.raises(DataError, match=r"estimate file .*bad\.json nests arrays or objects too deeply to be read"):
+        read_estimate(tmp_path / "bad.json")
 
 
 class _Minimal(Estimator):

@@ -26,7 +26,7 @@ from numpy.typing import NDArray
 
 from cappe.estimate._uncertainty import LocalUncertainty
 from cappe.exceptions import DataError
-from cappe.io.files import write_json
+from cappe.io.files import read_json, write_json
 
 __all__ = ["ESTIMATE_FORMAT", "ParameterEstimate", "read_estimate", "write_estimate"]
 
@@ -221,12 +221,8 @@ def write_estimate(path: str | Path, estimate: ParameterEstimate) -> Path:
 def read_estimate(path: str | Path) -> ParameterEstimate:
     """Read ``cappe.estimate/1`` JSON."""
     p = Path(path)
-    try:
-        data = json.loads(p.read_text())
-    except FileNotFoundError as exc:
-        msg = f"{p}: no such estimate file"
-        raise DataError(msg) from exc
-    except json.JSONDecodeError as exc:
-        msg = f"{p}: not JSON ({exc.msg} at line {exc.lineno})"
-        raise DataError(msg) from exc
+    data = read_json(p, "estimate file")
+    if not isinstance(data, Mapping):
+        msg = f"{p}: an estimate file must hold a JSON object; got {type(data).__name__}"
+        raise DataError(msg)
     return ParameterEstimate.from_dict(data, str(p))

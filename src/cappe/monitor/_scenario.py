@@ -20,7 +20,6 @@ which keeps responses that vanish by symmetry from being noise-free).
 
 from __future__ import annotations
 
-import json
 from collections.abc import Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
@@ -32,6 +31,7 @@ import numpy as np
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
 from cappe.io import write_frf, write_json
+from cappe.io.files import finite_number, read_json, shown
 from cappe.model import NumericModel, load_model
 from cappe.monitor._config import MonitorConfig
 from cappe.systems.frf import FRFData
@@ -236,20 +236,28 @@ def write_scenario(
 def read_scenario(path: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
     """Read a manifest: the document and its entries with ``file`` resolved and ``timestamp`` parsed."""
     p = Path(path)
-    try:
-        doc = json.loads(p.read_text(encoding="utf-8"))
-    except (OSError, json.JSONDecodeError) as exc:
-        msg = f"cannot read scenario manifest {p}: {exc}"
-        raise DataError(msg) from exc
-    if doc.get("format") != SCENARIO_FORMAT:
-        msg = f"{p}: format must be {SCENARIO_FORMAT!r}; got {doc.get('format')!r}"
+    doc = read_json(p, "scenario manifest")
+    got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__
+    if got != SCENARIO_FORMAT:
+        msg = f"{p}: format must be {SCENARIO_FORMAT!r}; got {shown(got)}"
+        raise DataError(msg)
+    measurements = doc.get("measurements", [])
+    if not isinstance(measurements, list):
+        msg = f"{p}: measurements must be a list; got {type(measurements).__name__}"
         raise DataError(msg)
     entries = []
-    for k, entry in enumerate(doc.get("measurements", [])):
+    for k, entry in enumerate(measurements):
+        if not isinstance(entry, dict):
+            msg = f"{p}: measurements[{k}] must be an object with 'file' and 'timestamp'; got {type(entry).__name__}"
+            raise DataError(msg)
         try:
             when = datetime.fromisoformat(entry["timestamp"])
             entries.append({**entry, "file": p.parent / entry["file"], "timestamp": when})
         except (KeyError, TypeError, ValueError) as exc:
-            msg = f"{p}: measurements[{k}] needs 'file' and an ISO 'timestamp': {exc}"
+            msg = f"{p}: measurements[{k}] needs 'file' and an ISO 'timestamp': {shown(str(exc))}"
             raise DataError(msg) from exc
+        conditions = entry.get("conditions", {})
+        if not isinstance(conditions, dict) or any(finite_number(v) is None for v in conditions.values()):
+            msg = f"{p}: measurements[{k}].conditions must be an object {{name: number}}; got {shown(conditions)}"
+            raise DataError(msg)
     return doc, entries
