@@ -22,6 +22,9 @@ def real_number(name: str, value: Any) -> float:
     """
     try:
         out = float(value)
+    except OverflowError:
+        msg = f"argument {name!r} must be finite; got an integer beyond the floating-point range"
+        raise DataError(msg) from None
     except (TypeError, ValueError):
         msg = f"argument {name!r} must be a real number; got {value!r}"
         raise DataError(msg) from None

@@ -123,3 +123,35 @@ def test_bad_frf_npz(tmp_path, capsys):
     np.savez(path, freq=np.ones(2), H=np.array([[["a", "b"]]]), input_names=np.array(["F1"]),
              output_names=np.array(["d1"]))
     _one_line_error(capsys, ["extract-modes", path, "--band", "1:100"], "bad-frf.npz")
+
+
+def test_setting_value_python_cannot_read_is_a_usage_error(tmp_path, capsys):
+    # json.loads raised RecursionError / ValueError (digit limit) through the --setting parser
+    ref = tmp_path / "ref.json"
+    assert main(["model", "modes", "builtin:two-mass-rig", "--modal-out", str(ref)]) == 0
+    capsys.readouterr()
+    for value in ["[" * 100_000, "9" * 5000]:
+        code = main(["estimate", "builtin:two-mass-rig", "--data", str(ref), "--method", "modal",
+                     "--setting", f"max_nfev={value}"])
+        err = capsys.readouterr().err
+        assert code == 2, err
+        assert err.startswith("cappe: usage error: --setting max_nfev: the value cannot be read")
+        assert "Traceback" not in err
+
+
+def test_errors_found_in_the_data_name_the_data_file(tmp_path, capsys):
+    # the readers name the file in their own errors; what the library finds later (a missing channel, an empty
+    # channel name) did not say which file the data came from
+    t = np.arange(64) / 64.0
+    path = tmp_path / "run.csv"
+    path.write_text("time,F,a\n" + "".join(f"{v:.17g},{np.sin(v):.17g},{np.cos(v):.17g}\n" for v in t))
+    code = main(["frf", str(path), "--input", "G", "--output", "a", "--nperseg", "32"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.startswith(f"cappe: error: {path}: input channel(s) ['G'] not found")
+    path.write_text("time,,a\n" + "".join(f"{v:.17g},{np.sin(v):.17g},{np.cos(v):.17g}\n" for v in t))
+    code = main(["frf", str(path), "--input", "F", "--output", "a"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "channel names must not be empty; channel 0 has none" in err
+    assert str(path) in err

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
-from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any
+from collections.abc import Callable, Mapping
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, ParamSpec
 
 import numpy as np
 
@@ -20,6 +22,7 @@ if TYPE_CHECKING:
 # that need no model do not pay for sympy and scipy.signal (about 1 s of imports)
 
 EXIT_OK, EXIT_FAILURE, EXIT_USAGE = 0, 1, 2
+_P = ParamSpec("_P")
 
 
 class UsageError(Exception):
@@ -90,6 +93,11 @@ class ModelContext:
             from cappe.io import read_parameters
 
             values.update(read_parameters(args.params))
+            try:  # the file's values alone first, so that a value breaking a rule names the file it came from
+                self.structure.resolve_parameters(values)
+            except ModelError as exc:
+                msg = f"{args.params}: {exc}"
+                raise ModelError(msg) from exc
         values.update(number_pairs(args.overrides, "--set"))
         self.values = self.structure.resolve_parameters(values)
         self.overrides = values
@@ -134,6 +142,31 @@ def _default(obj: Any) -> Any:
     if hasattr(obj, "tolist"):
         return obj.tolist()
     return str(obj)
+
+
+def naming_file(attribute: str) -> Callable[[Callable[_P, int]], Callable[_P, int]]:
+    """Make a command's DataError name the data file ``args.<attribute>`` where the message does not already.
+
+    The readers name the file in every error of their own; what the library finds later in the data (a channel
+    that is missing, a record too short for the segment length) does not know which file the data came from.
+    """
+
+    def decorate(func: Callable[_P, int]) -> Callable[_P, int]:
+        @functools.wraps(func)
+        def run(*pos: _P.args, **kw: _P.kwargs) -> int:
+            try:
+                return func(*pos, **kw)
+            except DataError as exc:
+                args = next((a for a in pos if isinstance(a, argparse.Namespace)), None)
+                path = getattr(args, attribute, None)
+                if not isinstance(path, str) or Path(path).name in str(exc):
+                    raise
+                msg = f"{path}: {exc}"
+                raise DataError(msg) from exc
+
+        return run
+
+    return decorate
 
 
 def run_guarded(func: Any, args: argparse.Namespace) -> int:

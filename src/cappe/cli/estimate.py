@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, text_pairs
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, naming_file, text_pairs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -67,6 +67,9 @@ def settings(items: list[str]) -> dict[str, Any]:
             out[name] = json.loads(value)
         except json.JSONDecodeError:
             out[name] = value
+        except (RecursionError, ValueError) as exc:  # nesting or integer digits beyond what Python reads
+            msg = f"--setting {name}: the value cannot be read ({type(exc).__name__}: {str(exc)[:80]})"
+            raise UsageError(msg) from exc
     return out
 
 
@@ -83,6 +86,7 @@ def _kind(data: Any) -> str:
     return type(data).__name__
 
 
+@naming_file("data")
 def run(args: argparse.Namespace) -> int:
     from cappe.estimate._registry import METHODS, estimator_class
     from cappe.io import read_parameters

@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from cappe.cli._common import UsageError, add_output_options, band, emit, names, text_pairs
+from cappe.cli._common import UsageError, add_output_options, band, emit, names, naming_file, text_pairs
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,6 +30,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run)
 
 
+@naming_file("frf")
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import extract_modes
     from cappe.io import read_frf, write_modal_data, write_uff_modal

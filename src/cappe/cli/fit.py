@@ -9,7 +9,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import UsageError, add_output_options, emit
+from cappe.cli._common import UsageError, add_output_options, emit, naming_file
 
 STRUCTURES = ("arx", "armax", "oe", "bj")
 
@@ -80,6 +80,7 @@ def _fit_quality(model: Any, data: Any) -> dict[str, Any]:
             "stable": stable}
 
 
+@naming_file("data")
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import OE, prune, select_order
     from cappe.io import read_time_data

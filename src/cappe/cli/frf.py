@@ -9,7 +9,7 @@ from typing import Literal
 
 import numpy as np
 
-from cappe.cli._common import UsageError, add_output_options, band, emit
+from cappe.cli._common import UsageError, add_output_options, band, emit, naming_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -31,6 +31,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.epilog = "-o writes the FRFs: .uff/.unv (UFF 58), .csv (re/im pairs) or .npz, by extension."
 
 
+@naming_file("data")
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import coherence_summary, estimate_frf
     from cappe.io import read_time_data, write_frf

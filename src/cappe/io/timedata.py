@@ -66,6 +66,10 @@ class TimeData:
                 f"got {values.shape}"
             )
             raise DataError(msg)
+        unnamed = [i for i, c in enumerate(channels) if not c.strip()]
+        if unnamed:
+            msg = f"channel names must not be empty; channel {unnamed[0]} has none"
+            raise DataError(msg)
         duplicates = sorted({c for c in channels if channels.count(c) > 1})
         if duplicates:
             msg = f"channel names must be unique; repeated: {duplicates}"
