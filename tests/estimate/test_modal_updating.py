@@ -238,3 +238,19 @@ def test_modal_updating_errors_name_what_is_wrong(two_mass, spindle_reference):
     blank = ModalData(ref.sensors, (ModalDataSet({}, s.frequency, s.damping, np.zeros((6, 2), complex)),))
     with pytest.raises(DataError, match=r"modes \[0, 1\] have all-zero shapes"):
         ModalUpdatingEstimator(two_mass, ["k11"]).fit(blank)
+
+
+def test_fit_returns_the_cost_it_minimized(slide, slide_reference):
+    # the estimator hands its cost over with the fit (no shared state): |r(centre)|^2 is the reported cost, and a
+    # second estimator fitted in between does not change what the first one holds
+    names = ["km", "kg0"]
+    first = ModalUpdatingEstimator(slide, names, start={"km": 5.0e6, "kg0": 2.0e7}).fit(slide_reference)
+    other = ModalUpdatingEstimator(slide, ["cm"]).fit(slide_reference)
+    cost = first.cost_function_
+    assert cost is not None
+    assert cost.space.names == tuple(names)
+    r = cost.residuals(cost.centre)
+    assert float(r @ r) == pytest.approx(first.estimate_.cost, rel=1e-12, abs=1e-30)  # same point, same residuals
+    np.testing.assert_array_equal(cost.centre, first.estimate_.values)
+    assert other.cost_function_ is not None
+    assert other.cost_function_.space.names == ("cm",)

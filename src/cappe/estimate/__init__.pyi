@@ -11,7 +11,7 @@ from ._automated import (
     select_stiffness,
     solve_subproblem,
 )
-from ._base import Estimator, fit_least_squares
+from ._base import CostFunction, Estimator, fit_least_squares
 from ._direct import DirectEstimator
 from ._feature_map import FeatureMapEstimator
 from ._hybrid import HybridEstimator
@@ -70,6 +70,7 @@ __all__ = [
     "mcmc_posterior",
     "parametric_bootstrap",
     "profile_likelihood",
+    "CostFunction",
     "Estimator",
     "LocalUncertainty",
     "ParameterEstimate",

@@ -64,7 +64,7 @@ from scipy.optimize import lsq_linear
 
 from cappe._rng import RandomLike
 from cappe.correlate import macxp_batch
-from cappe.estimate._base import _LAST_FIT, Estimator, fit_least_squares
+from cappe.estimate._base import CostFunction, Estimator, Fitted, least_squares_fit
 from cappe.estimate._modal_updating import ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -837,7 +837,7 @@ class AutomatedIdentification(Estimator):
 
     # -- the pipeline -------------------------------------------------------------------------------------------
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
-             rng: np.random.Generator) -> ParameterEstimate:
+             rng: np.random.Generator) -> Fitted:
         runner = Executor.coerce(self.executor, self.n_workers)
         try:
             # BLAS on one thread in the calling thread too: the refinements' least squares take an SVD of a Jacobian
@@ -850,7 +850,7 @@ class AutomatedIdentification(Estimator):
                 runner.close()
 
     def _stages(self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator,
-                runner: Executor) -> ParameterEstimate:
+                runner: Executor) -> Fitted:
         """GSA, stiffness subproblems and refinement, damping, joint refinement and validation (see the class)."""
         from tqdm.auto import tqdm
 
@@ -1001,6 +1001,7 @@ class AutomatedIdentification(Estimator):
                                             keep=True)
         timings["joint_refinement"] = time.perf_counter() - t
         estimate: ParameterEstimate = joint.pop("estimate")
+        cost: CostFunction | None = joint.pop("cost_function")
 
         # 5. validation ------------------------------------------------------------------------------------------
         t = time.perf_counter()
@@ -1089,7 +1090,7 @@ class AutomatedIdentification(Estimator):
             },
             "warnings": caught,
         })
-        return replace(estimate, method=self.method, diagnostics=diagnostics)
+        return Fitted(replace(estimate, method=self.method, diagnostics=diagnostics), cost)
 
     def _refine(
         self,
@@ -1119,8 +1120,6 @@ class AutomatedIdentification(Estimator):
         est = updater.estimate_
         out = current.copy()
         out[idx] = est.values
-        if keep:
-            _LAST_FIT.set((sub_space, problem.residuals, np.asarray(est.values, dtype=float)))
         info: dict[str, Any] = {
             "cost_before": float(r0 @ r0),
             "cost_after": float(est.cost),
@@ -1132,6 +1131,7 @@ class AutomatedIdentification(Estimator):
         }
         if keep:
             info["estimate"] = est
+            info["cost_function"] = CostFunction(sub_space, problem.residuals, np.asarray(est.values, dtype=float))
         return out, info
 
 
@@ -1149,8 +1149,9 @@ class AutomatedIdentification(Estimator):
         r0 = problem.residuals(current)
         diagnostics = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)"}
         start = np.clip(current, space.lower, space.upper)
-        est = fit_least_squares(self.method, space, problem.residuals, problem.jacobian,
-                                starts=start[None, :], diagnostics=diagnostics)
+        fitted = least_squares_fit(self.method, space, problem.residuals, problem.jacobian,
+                                   starts=start[None, :], diagnostics=diagnostics)
+        est = fitted.estimate
         info: dict[str, Any] = {
             "cost_before": float(r0 @ r0),
             "cost_after": float(est.cost),
@@ -1161,6 +1162,7 @@ class AutomatedIdentification(Estimator):
                                                                           strict=True)},
             "pairing": problem.pairing_report(np.asarray(est.values, dtype=float)),
             "estimate": est,
+            "cost_function": fitted.cost,
         }
         return np.asarray(est.values, dtype=float), info
 

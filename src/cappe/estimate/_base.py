@@ -10,7 +10,7 @@ from __future__ import annotations
 import warnings
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
-from contextvars import ContextVar
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -24,14 +24,41 @@ from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["Estimator", "fit_least_squares"]
+__all__ = ["CostFunction", "Estimator", "fit_least_squares"]
 
 Array = NDArray[np.float64]
 Residuals = Callable[[Array], Array]
 
-#: The residual function of the last :func:`fit_least_squares` call, with its space: how an estimator learns the
-#: cost its method minimized without every method having to hand it over (``Estimator.cost_slice``).
-_LAST_FIT: ContextVar[tuple[ParameterSpace, Residuals, Array] | None] = ContextVar("_LAST_FIT", default=None)
+
+@dataclass(frozen=True)
+class CostFunction:
+    """The cost ``|residuals(p)|^2`` a least-squares method minimized, and where (:meth:`Estimator.cost_slice`).
+
+    Attributes
+    ----------
+    space : ParameterSpace
+        The unknowns the residuals take (SI vectors, ``space.n``); may hold nuisance unknowns after the physical ones.
+    residuals : callable
+        ``residuals(p)`` -> ndarray (n_obs,).
+    centre : ndarray, shape (space.n,)
+        The optimum found (SI).
+    """
+
+    space: ParameterSpace
+    residuals: Residuals
+    centre: Array
+
+
+@dataclass(frozen=True)
+class Fitted:
+    """What an estimator's ``_fit`` may return instead of a bare estimate: the estimate and the cost it minimized."""
+
+    estimate: ParameterEstimate
+    cost: CostFunction | None = None
+
+    def with_estimate(self, estimate: ParameterEstimate) -> Fitted:
+        """The same cost with a post-processed estimate (more diagnostics, physical unknowns only ...)."""
+        return replace(self, estimate=estimate)
 
 
 class Estimator(ABC):
@@ -82,12 +109,10 @@ class Estimator(ABC):
         )
         self.numeric_ = numeric
         self.space_ = space
-        token = _LAST_FIT.set(None)
-        try:
-            result = self._fit(numeric, space, data, as_generator(self.rng))
-            self._cost = _LAST_FIT.get()
-        finally:
-            _LAST_FIT.reset(token)
+        outcome = self._fit(numeric, space, data, as_generator(self.rng))
+        fitted = outcome if isinstance(outcome, Fitted) else Fitted(outcome)
+        self._cost = fitted.cost
+        result = fitted.estimate
         if not result.success:
             warnings.warn(
                 f"{self.method} estimation did not converge: {result.message}", ConvergenceWarning, stacklevel=2
@@ -98,8 +123,10 @@ class Estimator(ABC):
     @abstractmethod
     def _fit(
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
-    ) -> ParameterEstimate:
-        """The method itself: validate ``data`` and estimate the unknowns of ``space``."""
+    ) -> ParameterEstimate | Fitted:
+        """The method itself: validate ``data`` and estimate the unknowns of ``space``; methods that end in a
+        least-squares search return :class:`Fitted` (from :func:`least_squares_fit`) so that their cost can be
+        sliced."""
 
     @property
     def estimate_(self) -> ParameterEstimate:
@@ -114,6 +141,12 @@ class Estimator(ABC):
         """``{name: estimate}``."""
         return self.estimate_.parameters
 
+    @property
+    def cost_function_(self) -> CostFunction | None:
+        """The cost the method minimized (None for methods that do not end in a nonlinear least-squares search)."""
+        _ = self.estimate_  # NotFittedError before fit
+        return self._cost
+
     def cost_slice(self, names: Sequence[str], *, n: int = 31, span: float | None = None) -> Any:
         """The method's cost ``|r|^2`` on a grid of two unknowns around the optimum, the others held there.
 
@@ -126,11 +159,11 @@ class Estimator(ABC):
         from cappe.sensitivity import CostLandscape
 
         estimate = self.estimate_
-        captured = getattr(self, "_cost", None)
+        captured = self.cost_function_
         if captured is None:
             msg = f"{self.method}: no nonlinear cost to slice (the method does not end in a least-squares search)"
             raise ModelError(msg)
-        space, residuals, centre = captured
+        space, residuals, centre = captured.space, captured.residuals, captured.centre
         if len(names) != 2 or any(name not in estimate.names for name in names):
             msg = f"cost_slice needs two of the unknowns {list(estimate.names)}; got {list(names)}"
             raise ModelError(msg)
@@ -181,6 +214,27 @@ def fit_least_squares(
     that global search of :func:`cappe.optimize.minimize` over the whole box (seeded by ``rng``); its result joins
     the starts of the local fit.
     """
+    return least_squares_fit(method, space, residuals, jacobian, starts=starts, noise_variance=noise_variance,
+                             diagnostics=diagnostics, max_nfev=max_nfev, x_scale=x_scale, strategy=strategy,
+                             rng=rng).estimate
+
+
+def least_squares_fit(
+    method: str,
+    space: ParameterSpace,
+    residuals: Residuals,
+    jacobian: Callable[[Array], Array] | None = None,
+    *,
+    starts: Array | None = None,
+    noise_variance: float | None = None,
+    diagnostics: Mapping[str, Any] | None = None,
+    max_nfev: int | None = None,
+    x_scale: Array | str = "jac",
+    strategy: str | None = None,
+    rng: RandomLike = None,
+) -> Fitted:
+    """:func:`fit_least_squares` with the cost it minimized, for an estimator's ``_fit`` (no cost where every
+    start failed)."""
     lo, hi = space.internal_bounds()
     candidates = np.atleast_2d(space.start if starts is None else np.asarray(starts, dtype=float))
     global_diag: dict[str, Any] = {}
@@ -224,10 +278,9 @@ def fit_least_squares(
         if best is None or sol.cost < best.cost:
             best = sol
     if best is None:
-        return ParameterEstimate.failed(method, space.names, "every start failed: " + str(runs[-1]["message"]),
-                                        {"runs": runs, **(diagnostics or {})})
+        return Fitted(ParameterEstimate.failed(method, space.names, "every start failed: " + str(runs[-1]["message"]),
+                                               {"runs": runs, **(diagnostics or {})}))
     p = space.from_internal(best.x)
-    _LAST_FIT.set((space, residuals, p))
     jac_p = best.jac / space.value_jacobian(best.x)  # back to d r / d p in SI
     unc = jacobian_uncertainty(names=space.names, values=p, jacobian=jac_p, residuals=best.fun,
                                noise_variance=noise_variance)
@@ -250,6 +303,7 @@ def fit_least_squares(
     message = str(best.message)
     if at_bound:
         message += f"; estimate at a bound for {at_bound}"
-    return ParameterEstimate.from_uncertainty(
+    estimate = ParameterEstimate.from_uncertainty(
         method, unc, cost=float(2 * best.cost), success=success, message=message, diagnostics=diag
     )
+    return Fitted(estimate, CostFunction(space, residuals, p))

@@ -38,8 +38,7 @@ from scipy.interpolate import RBFInterpolator, RegularGridInterpolator
 from scipy.stats import qmc
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, fit_least_squares
-from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
@@ -243,7 +242,7 @@ class FeatureMapEstimator(Estimator):
 
     def _fit(
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
-    ) -> ParameterEstimate:
+    ) -> Fitted:
         kind = self._check(space)
         modal = self._data(data)
         measured, plan = self._measured(modal, model.n_dof)
@@ -298,9 +297,10 @@ class FeatureMapEstimator(Estimator):
 
         distance = np.sum(((features - measured.values) / sigma) ** 2, axis=1)
         starts = space.from_internal(points[np.argsort(distance)[: _STARTS]])
-        estimate = fit_least_squares(self.method, space, weighted(sigma), None, starts=starts, noise_variance=1.0)
+        first = least_squares_fit(self.method, space, weighted(sigma), None, starts=starts, noise_variance=1.0)
+        estimate = first.estimate
         if not np.all(np.isfinite(estimate.values)):
-            return estimate
+            return first
         # the surrogate's error near the estimate (at it and half a map spacing around it, from exact model
         # evaluations) joins the feature noise; the fit is repeated with these weights from the estimate
         spacing = (hi - lo) / (np.array([ax.size - 1 for ax in grid_axes]) if grid_axes else
@@ -328,8 +328,9 @@ class FeatureMapEstimator(Estimator):
             "sigma": {f: float(v) for f, v in zip(measured.names, sigma, strict=True)},
             "model_evaluations": int(points.shape[0] + _VALIDATION + near.shape[0]),
         }
-        estimate = fit_least_squares(self.method, space, weighted(sigma), None, starts=estimate.values[None, :],
-                                     noise_variance=1.0, diagnostics=diagnostics)
+        refit = least_squares_fit(self.method, space, weighted(sigma), None, starts=estimate.values[None, :],
+                                  noise_variance=1.0, diagnostics=diagnostics)
+        estimate = refit.estimate
         # the check: the model itself (not the surrogate) at the estimate must reproduce the measured features
         # within their noise; otherwise they are out of reach within the bounds (or the surrogate misled the search)
         u_hat = space.to_internal(estimate.values)
@@ -355,8 +356,8 @@ class FeatureMapEstimator(Estimator):
                 f"worst {measured.names[worst]} = {exact[worst]:.6g} against {measured.values[worst]:.6g} measured; "
                 f"{message}"
             )
-        return dataclasses.replace(estimate, ci95=ci95, success=success, message=message,
-                                   diagnostics=diagnostics)
+        return refit.with_estimate(dataclasses.replace(estimate, ci95=ci95, success=success, message=message,
+                                                       diagnostics=diagnostics))
 
 
 def _surrogate(kind: str, points: Array, features: Array, axes: list[Array], lo: Array,

@@ -14,7 +14,7 @@ from typing import Any
 import numpy as np
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import _LAST_FIT, Estimator
+from cappe.estimate._base import Estimator, Fitted
 from cappe.estimate._registry import estimator_class
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -60,7 +60,7 @@ class HybridEstimator(Estimator):
 
     def _fit(
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
-    ) -> ParameterEstimate:
+    ) -> ParameterEstimate | Fitted:
         stages = list(self.stages)
         if len(stages) < 2 or "hybrid" in stages:
             msg = f"a hybrid needs two or more stages of other methods; got {stages}"
@@ -91,9 +91,7 @@ class HybridEstimator(Estimator):
                     return ParameterEstimate.failed(self.method, space.names, msg, {"stages": history})
                 start = space.mapping(np.clip(result.values, space.lower, space.upper))
         assert result is not None  # stages is non-empty
-        last_cost = getattr(estimator, "_cost", None)
-        if last_cost is not None:
-            _LAST_FIT.set(last_cost)  # the hybrid's cost is its last stage's
         diag = dict(result.diagnostics)
         diag["stages"] = history
-        return replace(result, method=self.method, diagnostics=diag)
+        # the hybrid's cost is its last stage's
+        return Fitted(replace(result, method=self.method, diagnostics=diag), estimator.cost_function_)

@@ -34,9 +34,8 @@ from numpy.typing import NDArray
 
 from cappe._rng import RandomLike
 from cappe.correlate import mac, macxp, pair_modes
-from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._one_step import random_starts
-from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
@@ -260,12 +259,13 @@ class ModalUpdatingEstimator(Estimator):
                              lambda p: evaluate(p)[2])
 
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
-             rng: np.random.Generator) -> ParameterEstimate:
+             rng: np.random.Generator) -> Fitted:
         problem = self._problem(model, space, data)
         engine, (w_f, w_z, w_s) = problem.engine, problem.weights
         sets: tuple[ModalDataSet, ...] = data.sets
         starts = random_starts(space, self.starts, rng)
-        result = fit_least_squares(self.method, space, problem.residuals, problem.jacobian, starts=starts)
+        fitted = least_squares_fit(self.method, space, problem.residuals, problem.jacobian, starts=starts)
+        result = fitted.estimate
         pairings = problem.pairings(np.asarray(result.values, dtype=float))
         report = []
         for data_set, pairing in zip(sets, pairings, strict=True):
@@ -282,7 +282,7 @@ class ModalUpdatingEstimator(Estimator):
             })
         diagnostics = dict(result.diagnostics)
         diagnostics.update({"pairing": report, "weights": [w_f, w_z, w_s], "sensors": list(data.sensors)})
-        return replace(result, diagnostics=diagnostics)
+        return fitted.with_estimate(replace(result, diagnostics=diagnostics))
 
 
 def _shape_residual(a: Array, da: Array, x: CArray) -> tuple[CArray, CArray]:

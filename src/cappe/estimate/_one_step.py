@@ -58,7 +58,7 @@ from scipy.optimize import least_squares
 
 from cappe._arguments import positive_number
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, fit_least_squares
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
@@ -454,7 +454,7 @@ class OneStepEstimator(Estimator):
 
     # -- the fit -----------------------------------------------------------------------------------------------
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
-             rng: np.random.Generator) -> ParameterEstimate:
+             rng: np.random.Generator) -> Fitted:
         inputs, outputs, dt, records = self._records(model, data)
         n_samples = sum(r.u.shape[0] for r in records)
         max_delay = 0.0  # in samples
@@ -532,8 +532,9 @@ class OneStepEstimator(Estimator):
             if _sum_squares(exact_residuals, first) < _sum_squares(exact_residuals, current[0]):
                 current = first[None, :]
                 stages.append({"note": "the start fits the exact output error better; the final fit starts there"})
-        result = fit_least_squares(self.method, full, exact_residuals, starts=current,
+        fitted = least_squares_fit(self.method, full, exact_residuals, starts=current,
                                    diagnostics={"stages": stages})
+        result = fitted.estimate
         theta = result.values
         params, delay = split(theta)
         nuisance: dict[str, Any] = {
@@ -548,7 +549,7 @@ class OneStepEstimator(Estimator):
             nuisance["delay"] = {"value": delay * dt, "samples": delay, "std": std}
         if self.offsets:
             nuisance["offsets"] = self._offsets(sim, records, params, delay, outputs, len(theta), result.cost)
-        return _physical(result, space.n, nuisance)
+        return fitted.with_estimate(_physical(result, space.n, nuisance))
 
     def _project(self, r: Array, modes: _Modes, sim: _TimeModel, *, free: bool) -> Array:
         """Output error (N, n_out) with the offsets (and the free response) projected out, flattened."""
@@ -933,13 +934,14 @@ class OneStepFRFEstimator(Estimator):
         return _FRFProblem(full, shift, residuals, jacobian, info)
 
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
-             rng: np.random.Generator) -> ParameterEstimate:
+             rng: np.random.Generator) -> Fitted:
         problem = self._problem(model, space, data)
         full, shift = problem.space, problem.shift
         starts = random_starts(space, self.starts, rng)
         starts = np.column_stack([starts, np.full((starts.shape[0], full.n - space.n), shift)])
-        result = fit_least_squares(self.method, full, problem.residuals, problem.jacobian, starts=starts)
+        fitted = least_squares_fit(self.method, full, problem.residuals, problem.jacobian, starts=starts)
+        result = fitted.estimate
         nuisance = dict(problem.info)
         if self.delay:
             nuisance["delay"] = {"value": float(result.values[space.n] - shift), "std": float(result.std[space.n])}
-        return _physical(result, space.n, nuisance)
+        return fitted.with_estimate(_physical(result, space.n, nuisance))

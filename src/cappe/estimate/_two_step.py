@@ -68,8 +68,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import qmc
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, fit_least_squares
-from cappe.estimate._result import ParameterEstimate
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.io.timedata import TimeData
@@ -525,7 +524,7 @@ class _TwoStep(Estimator):
 
     def _fit(
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
-    ) -> ParameterEstimate:
+    ) -> Fitted:
         self._check_settings()
         pairs, tfs, source = _experimental(self, model, data)
         self.transfer_functions_ = tuple(tfs)
@@ -540,7 +539,7 @@ class _TwoStep(Estimator):
             "weights": dict(zip([p.label for p in pairs], weights.tolist(), strict=True)),
             **info,
         }
-        return fit_least_squares(
+        return least_squares_fit(
             self.method, space, residuals, jacobian if engine.analytic else None, starts=starts,
             diagnostics=diagnostics,
         )
