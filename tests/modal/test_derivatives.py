@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from cappe.exceptions import IllConditionedWarning, ModelError
-from cappe.modal import ModalEngine, modal_derivatives
+from cappe.modal import ModalEngine, exact_mode_derivatives, modal_derivatives
 from cappe.model import NumericModel, StructureBuilder
 
 
@@ -130,3 +130,41 @@ def test_derivatives_for_chosen_parameters_are_those_columns(slide):
                                atol=1e-12 * np.abs(every.d_shapes).max())
     with pytest.raises(ModelError, match="unknown parameters \\['nope'\\]"):
         engine.derivatives(None, {"z": 0.2}, parameters=["nope"])
+
+
+def test_exact_mode_derivatives_match_finite_differences(slide):
+    # poles and scale-free shapes of the exact complex modes, against central differences of the engine's own exact
+    # modes (a different code path: batched eigen solves and pairing with the real modes)
+    model = NumericModel(slide)
+    engine = ModalEngine(model, n_workers=1)
+    position = {"z": 0.25}
+    p = model.nominal * np.random.default_rng(3).uniform(0.8, 1.2, model.nominal.size)
+    names = ["km", "cm", "eta", "ms"]  # stiffness, viscous, loss factor and a mass (dA then has M^-1 dM terms)
+    assert all(n in model.parameter_names for n in names)
+    base = engine.evaluate(p, position, exact=True)
+    d = exact_mode_derivatives(engine, p, position, poles=base.poles[0], parameters=names)
+    np.testing.assert_allclose(d.poles, base.poles[0], rtol=1e-10)  # the same eigenvalues, picked by nearness
+    row = np.argmax(np.abs(d.shapes), axis=0)
+    cols = np.arange(d.shapes.shape[1])
+    unit = d.shapes / d.shapes[row, cols]
+
+    def normalized(batch):
+        a = batch.complex_shapes[0]  # at the sensors
+        return a / a[row, cols]
+
+    for i, name in enumerate(names):
+        k = model.parameter_names.index(name)
+        h = 1e-6 * p[k]
+        up, down = p.copy(), p.copy()
+        up[k] += h
+        down[k] -= h
+        bu, bd = engine.evaluate(up, position, exact=True), engine.evaluate(down, position, exact=True)
+        fd_poles = (bu.poles[0] - bd.poles[0]) / (2 * h)
+        # relative step 1e-6: truncation ~1e-12, round-off ~1e-10 of the largest pole
+        np.testing.assert_allclose(d.d_poles[i], fd_poles, atol=1e-6 * np.abs(fd_poles).max() + 1e-12)
+        # shapes normalized at their largest sensor component: the derivative of that normalization is
+        # (da - a da_max / a_max) / a_max, which removes the arbitrary scale from both sides
+        da = d.d_shapes[i]
+        analytic = (da - unit * da[row, cols]) / d.shapes[row, cols]
+        fd_shapes = (normalized(bu) - normalized(bd)) / (2 * h)
+        np.testing.assert_allclose(analytic, fd_shapes, atol=1e-5 * np.abs(fd_shapes).max() + 1e-12)

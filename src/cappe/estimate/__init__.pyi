@@ -5,7 +5,6 @@ from ._automated import (
     DAMPING_KINDS,
     AutomatedIdentification,
     DampingLeastSquares,
-    ExactModalProblem,
     SubproblemResult,
     damping_least_squares,
     select_stiffness,
@@ -13,6 +12,7 @@ from ._automated import (
 )
 from ._base import CostFunction, Estimator, fit_least_squares
 from ._direct import DirectEstimator
+from ._exact_modal import ExactModalProblem
 from ._feature_map import FeatureMapEstimator
 from ._hybrid import HybridEstimator
 from ._kalman import ExtendedKalmanEstimator, UnscentedKalmanEstimator

@@ -9,6 +9,11 @@ the modal expansion is exact here because all n modes are known):
 * with ``zeta_r = c_r / (2 omega_r) + h_r / (2 omega_r^2)``, ``c_r = phi_r^T C phi_r``, ``h_r = phi_r^T H phi_r``:
   ``d zeta_r = dc_r / (2 omega) - c_r d omega / (2 omega^2) + dh_r / (2 omega^2) - h_r d omega / omega^3``,
   ``dc_r = phi_r^T dC phi_r + 2 phi_r^T C d phi_r`` (likewise ``dh_r``) and ``d omega = d lambda / (2 omega)``.
+
+Exact complex modes (:func:`exact_mode_derivatives`): with the state matrix ``A V = V Lambda`` and ``W = V^-1``, a
+parameter change ``dA`` moves pole r by ``(W dA V)_rr`` and its eigenvector by
+``sum_{s != r} (W dA V)_sr / (lambda_r - lambda_s) v_s`` plus a multiple of ``v_r`` (a change of the arbitrary
+complex scale, left out).
 """
 
 from __future__ import annotations
@@ -20,7 +25,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import IllConditionedWarning, ModelError
 from cappe.modal._engine import ModalEngine, ModeReference, _track
@@ -28,9 +33,10 @@ from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
 from cappe.systems.mechanical import MechanicalSystem
 
-__all__ = ["ModalDerivatives", "modal_derivatives"]
+__all__ = ["ExactModeDerivatives", "ModalDerivatives", "exact_mode_derivatives", "modal_derivatives"]
 
 Array = NDArray[np.float64]
+CArray = NDArray[np.complex128]
 #: Eigenvalues closer than this (relative to the largest) are treated as repeated.
 REPEATED_TOLERANCE = 1e-9
 
@@ -205,3 +211,119 @@ def modal_derivatives(
     array([-0.008, -0.492])
     """
     return derivatives(ModalEngine(model, sensors=sensors, n_modes=n_modes), params, position)
+
+
+@dataclass(frozen=True)
+class ExactModeDerivatives:
+    """Exact complex modes at one parameter vector and their first-order derivatives.
+
+    Attributes
+    ----------
+    poles : ndarray, complex, shape (m,)
+        Poles ``lambda_r`` (rad/s) of the state matrix, one per requested mode.
+    shapes : ndarray, complex, shape (n_sensors, m)
+        Displacement shapes at the sensors (the eigenvectors' arbitrary complex scale).
+    d_poles : ndarray, complex, shape (n_params, m)
+        ``d lambda / d p`` per parameter unit.
+    d_shapes : ndarray, complex, shape (n_params, n_sensors, m)
+        Derivatives of the shapes without their component along the shape itself (a change of scale).
+    parameter_names, sensors : tuple of str
+    """
+
+    poles: CArray
+    shapes: CArray
+    d_poles: CArray
+    d_shapes: CArray
+    parameter_names: tuple[str, ...]
+    sensors: tuple[str, ...]
+
+
+def exact_mode_derivatives(
+    engine: ModalEngine,
+    params: ParamsLike,
+    position: Mapping[str, float] | None,
+    *,
+    poles: ArrayLike,
+    parameters: Sequence[str] | None = None,
+) -> ExactModeDerivatives:
+    """Analytic derivatives of exact complex modes: first-order perturbation of the state matrix's eigensystem.
+
+    One eigen-decomposition of the state matrix (n_dof ``2 n``) for all parameters, instead of one per parameter.
+
+    Parameters
+    ----------
+    engine : ModalEngine
+        Model and sensors.
+    params : mapping, sequence or ndarray of shape (n_params,), optional
+        Parameter vector (default nominal).
+    position : mapping, optional
+        Axis position.
+    poles : array_like, complex, shape (m,)
+        The poles whose modes are differentiated (each picks the state matrix's nearest eigenvalue, e.g. the
+        paired ``ModalBatch.poles`` of :meth:`ModalEngine.evaluate` with ``exact=True``).
+    parameters : sequence of str, optional
+        Parameters differentiated (default all).
+
+    Returns
+    -------
+    ExactModeDerivatives
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> engine = ModalEngine(load_model("builtin:two-mass-rig"))
+    >>> batch = engine.evaluate(None, exact=True)
+    >>> d = exact_mode_derivatives(engine, None, None, poles=batch.poles[0], parameters=["k11", "m1"])
+    >>> d.d_poles.shape, bool(d.d_poles[0, 1].imag > 0)   # the second mode stiffens with k11
+    ((2, 2), True)
+    """
+    model = engine.model
+    full = model.vector(params)
+    names = tuple(model.parameter_names) if parameters is None else tuple(parameters)
+    mats = model.matrices(full, position)
+    dmats = model.matrix_derivatives(full, position, parameters=list(names))
+    n = model.n_dof
+    stiff = mats["K"] + 1j * mats["H"]
+    visc = mats["C"] + mats["G"]
+    minv = np.linalg.inv(mats["M"])
+    state = np.zeros((2 * n, 2 * n), dtype=complex)
+    state[:n, n:] = np.eye(n)
+    state[n:, :n] = -(minv @ stiff)
+    state[n:, n:] = -(minv @ visc)
+    lam, vec = np.linalg.eig(state)
+    inv = np.linalg.inv(vec)
+    # the requested poles are eigenvalues of the same matrix (the engine builds it alike): find their columns
+    idx = np.array([int(np.argmin(np.abs(lam - pole))) for pole in np.atleast_1d(np.asarray(poles))])
+    lam_r = lam[idx]
+    labels, sensors = engine.sensor_rows(position)  # (n_s, n)
+    gap = lam_r[None, :] - lam[:, None]  # (2n, m): lambda_r - lambda_s
+    own = np.zeros(gap.shape, dtype=bool)
+    own[idx, np.arange(idx.size)] = True
+    scale = max(float(np.abs(lam).max()), 1e-300)
+    near = own | (np.abs(gap) <= REPEATED_TOLERANCE * scale)
+    safe_gap = np.where(near, 1.0, gap)
+    # dA has only its lower block row, so W dA V = W[:, n:] (dA_low V): with W_low = W[:, n:] M^-1 and
+    # d(M^-1 X) = M^-1 (dX - dM M^-1 X), (W dA V) = -W_low (dK~ V_q + dC~ V_v) over the requested columns only
+    w_low = inv[:, n:] @ minv  # (2n, n)
+    v_q, v_v = vec[:n, idx], vec[n:, idx]  # displacement and velocity parts of the requested eigenvectors
+    minv_stiff_vq = minv @ (stiff @ v_q)
+    minv_visc_vv = minv @ (visc @ v_v)
+    d_poles, d_shapes = [], []
+    for i in range(len(names)):  # dmats hold the derivatives with respect to ``names`` only, in order
+        d_low = (dmats["K"][i] + 1j * dmats["H"][i]) @ v_q
+        d_low += (dmats["C"][i] + (dmats["G"][i] if "G" in dmats else 0.0)) @ v_v
+        if np.any(dmats["M"][i]):
+            d_low -= dmats["M"][i] @ (minv_stiff_vq + minv_visc_vv)
+        g = -(w_low @ d_low)  # (2n, m): (W dA V)_{s r}
+        d_poles.append(g[idx, np.arange(idx.size)])
+        coef = np.where(near, 0.0, g / safe_gap)
+        d_shapes.append(sensors @ (vec[:n] @ coef))  # (n_s, m)
+    m = idx.size
+    return ExactModeDerivatives(
+        poles=lam_r,
+        shapes=sensors @ v_q,
+        d_poles=np.array(d_poles, dtype=complex).reshape(len(names), m),
+        d_shapes=np.array(d_shapes, dtype=complex).reshape(len(names), sensors.shape[0], m),
+        parameter_names=names,
+        sensors=labels,
+    )

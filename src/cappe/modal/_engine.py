@@ -140,6 +140,19 @@ class ModalEngine:
         self.sensors = self._sensor_rows(self.model.structure.default_position())[0]
 
     # -- sensors ----------------------------------------------------------------------------------
+    def sensor_rows(self, position: Mapping[str, float] | None = None) -> tuple[tuple[str, ...], Array]:
+        """The engine's sensor channels at ``position``: labels and the rows (n_s, n_dof) mapping DOFs to them.
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> labels, rows = ModalEngine(load_model("builtin:two-mass-rig"), sensors="dofs").sensor_rows()
+        >>> labels, rows.shape
+        (('mass1.x', 'mass2.x'), (2, 2))
+        """
+        labels, rows = self._sensor_rows(position)
+        return labels, rows.copy()
+
     def _sensor_rows(self, position: Mapping[str, float] | None) -> tuple[tuple[str, ...], Array]:
         pos = self.model.position_vector(position)
         cached = self._sensor_cache.get(pos)
