@@ -13,6 +13,7 @@ from benchmarks import (
     bench_scaling,
     bench_sobol,
     bench_startup,
+    bench_subproblem,
 )
 
 
@@ -25,6 +26,7 @@ def main() -> None:
     bench_monitor.main()
     bench_pipeline.main()
     bench_automated.main()
+    bench_subproblem.main()
     bench_scaling.main()
     bench_startup.main()
 

@@ -16,17 +16,17 @@ import numpy as np
 import pytest
 from scipy.optimize import approx_fprime
 
-from cappe.estimate import ParameterSpace
-from cappe.estimate._automated import (
+from cappe.estimate import (
     AutomatedIdentification,
     ExactModalProblem,
+    ParameterSpace,
     SubproblemResult,
-    _derangement,
-    _mode_problem,
     damping_least_squares,
     select_stiffness,
     solve_subproblem,
 )
+from cappe.estimate._automated import _derangement
+from cappe.estimate._subproblems import _mode_problem
 from cappe.estimate._validation import model_receptance, summarize, validate_identification
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
@@ -162,10 +162,10 @@ def test_gsa_significant_sets_contain_the_locally_dominant_parameters(ideal, ben
 @pytest.mark.parametrize("linear", [True, False])
 def test_subproblem_jacobian_matches_finite_differences(bench, monkeypatch, linear):
     # linear: K and M derivatives shared by the batch; else (forced here) the batch is differentiated centrally
-    import cappe.estimate._automated as automated
+    import cappe.estimate._subproblems as subproblems
 
     if not linear:
-        monkeypatch.setattr(automated, "_constant_derivatives", lambda *args: None)
+        monkeypatch.setattr(subproblems, "_constant_derivatives", lambda *args: None)
     reference = ModalEngine(bench).modal_data(POSITIONS[1:2], params=random_truth(bench, 5), exact=False)
     engine = ModalEngine(bench, sensors=list(reference.sensors))
     columns = np.array([bench.parameter_names.index(n) for n in ("me_kx", "me_kz", "bsd_kz")])
@@ -488,7 +488,7 @@ def test_validation_frf_criteria_equal_the_correlate_functions():
 
 
 def test_constant_derivatives_only_for_linear_parameters(tmp_path):
-    from cappe.estimate._automated import _constant_derivatives
+    from cappe.estimate._subproblems import _constant_derivatives
 
     text = (
         "format: cappe.model/1\nname: nl\nparameters:\n  - {name: m, value: 2.0, kind: mass}\n"

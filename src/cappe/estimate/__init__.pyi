@@ -1,16 +1,9 @@
 """Names and types of :mod:`cappe.estimate`: its ``__init__.py`` loads each name on first use from the module
 imported here (lazy_loader reads these imports); type checkers read the imports and ``__all__``."""
 
-from ._automated import (
-    DAMPING_KINDS,
-    AutomatedIdentification,
-    DampingLeastSquares,
-    SubproblemResult,
-    damping_least_squares,
-    select_stiffness,
-    solve_subproblem,
-)
+from ._automated import DAMPING_KINDS, AutomatedIdentification
 from ._base import CostFunction, Estimator, fit_least_squares
+from ._damping_least_squares import DampingLeastSquares, damping_least_squares
 from ._direct import DirectEstimator
 from ._exact_modal import ExactModalProblem
 from ._feature_map import FeatureMapEstimator
@@ -30,6 +23,7 @@ from ._resampling import (
 from ._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
 from ._space import ParameterSpace
 from ._study import StudyResult, simulate_data, simulation_study
+from ._subproblems import SubproblemResult, select_stiffness, solve_subproblem
 from ._two_step import TwoStepTFEstimator, TwoStepZPKEstimator, model_transfer_functions
 from ._uncertainty import LocalUncertainty, jacobian_uncertainty
 from ._validation import ValidationResult, find_set, model_receptance, summarize, validate_identification
