@@ -155,8 +155,8 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _run_time(args: argparse.Namespace) -> int:
-    from cappe.io import TimeData, write_time_data
-    from cappe.systems import time_response
+    from cappe.io import write_time_data
+    from cappe.systems import TimeData, time_response
 
     ctx = _context(args)
     system = ctx.system()

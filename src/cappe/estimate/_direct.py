@@ -58,10 +58,10 @@ from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError
-from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
 from cappe.systems.statespace import StateSpaceModel
+from cappe.systems.timedata import TimeData
 
 __all__ = ["DirectEstimator"]
 

@@ -75,9 +75,9 @@ from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import _NULL_WEIGHT, null_direction_text
 from cappe.exceptions import DataError
-from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.timedata import TimeData
 
 __all__ = ["ExtendedKalmanEstimator", "UnscentedKalmanEstimator"]
 

@@ -62,11 +62,11 @@ from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
-from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
 from cappe.model.numeric import ParamsLike
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.timedata import TimeData
 
 __all__ = ["FRFDerivatives", "OneStepEstimator", "OneStepFRFEstimator", "frf_derivatives"]
 

@@ -97,8 +97,7 @@ def simulate_data(
     ``noise`` times each shape's largest component on the shapes.
     """
     from cappe.identify import estimate_frf, random_noise
-    from cappe.io.timedata import TimeData
-    from cappe.systems import time_response
+    from cappe.systems import TimeData, time_response
 
     system = model.system(model.structure.resolve_parameters(truth))
     if kind == "modal":

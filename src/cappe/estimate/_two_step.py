@@ -71,10 +71,10 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
-from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, Structure
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.timedata import TimeData
 from cappe.systems.transfer import TransferFunctionModel
 from cappe.systems.zpk import ZeroPoleGainModel
 

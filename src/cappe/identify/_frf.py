@@ -28,8 +28,8 @@ from cappe._arguments import positive_number, real_number
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
 from cappe.identify._signals import SteppedSineSchedule, _band, _integer
 from cappe.io.measurements import match_channels
-from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.frf import FRFData
+from cappe.systems.timedata import TimeData, check_clipping
 
 __all__ = [
     "CoherenceSummary",
@@ -729,7 +729,7 @@ def estimate_frf(
     Examples
     --------
     >>> import numpy as np
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> rng = np.random.default_rng(0)
     >>> f = rng.standard_normal(4096)
     >>> y = np.convolve(f, [0.5, 0.25])[:4096]  # y[k] = 0.5 f[k] + 0.25 f[k-1]

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.identify._polynomial import ARMAX, ARX, OE, BoxJenkins, PolynomialModel
-from cappe.io.timedata import TimeData
+from cappe.systems.timedata import TimeData
 
 __all__ = ["OrderSelection", "select_order"]
 

@@ -33,8 +33,8 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import ConvergenceWarning, DataError, IllConditionedWarning, ModelError, NotFittedError
 from cappe.io.measurements import match_channels
-from cappe.io.timedata import TimeData, check_clipping
 from cappe.systems.statespace import StateSpaceModel
+from cappe.systems.timedata import TimeData, check_clipping
 from cappe.systems.transfer import TransferFunctionModel, transfer_function
 from cappe.systems.zpk import ZeroPoleGainModel, zpk
 
@@ -1012,7 +1012,7 @@ class ARX(PolynomialModel):
     Examples
     --------
     >>> import numpy as np, scipy.signal as sig
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> u = np.random.default_rng(0).standard_normal(500)
     >>> y = sig.lfilter([0, 0.5], [1, -0.8], u)
     >>> model = ARX(na=1, nb=1).fit(TimeData.from_rate(100.0, {"u": u, "y": y}), inputs=["u"], output="y")
@@ -1071,7 +1071,7 @@ class ARMAX(PolynomialModel):
     Examples
     --------
     >>> import numpy as np, scipy.signal as sig
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> rng = np.random.default_rng(1)
     >>> u, e = rng.standard_normal(2000), 0.1 * rng.standard_normal(2000)
     >>> y = sig.lfilter([0, 1.0], [1, -0.7], u) + sig.lfilter([1, 0.5], [1, -0.7], e)
@@ -1136,7 +1136,7 @@ class OE(PolynomialModel):
     Examples
     --------
     >>> import numpy as np, scipy.signal as sig
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> u = np.random.default_rng(2).standard_normal(1000)
     >>> y = sig.lfilter([0, 0.2, 0.1], [1, -1.2, 0.5], u)
     >>> model = OE(nb=2, nf=2).fit(TimeData.from_rate(1.0, {"u": u, "y": y}), inputs="u", output="y")
@@ -1191,7 +1191,7 @@ class BoxJenkins(PolynomialModel):
     Examples
     --------
     >>> import numpy as np, scipy.signal as sig
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> rng = np.random.default_rng(3)
     >>> u, e = rng.standard_normal(3000), 0.2 * rng.standard_normal(3000)
     >>> y = sig.lfilter([0, 1.0], [1, -0.5], u) + sig.lfilter([1.0], [1, -0.9], e)

@@ -40,8 +40,8 @@ from scipy.integrate import cumulative_trapezoid
 
 from cappe._arguments import is_numeric, positive_number, real_number
 from cappe.exceptions import DataError, DataWarning, IllConditionedWarning
-from cappe.io.timedata import TimeData
 from cappe.model.numeric import NumericModel, ParamsLike
+from cappe.systems.timedata import TimeData
 
 __all__ = [
     "NINE_ACCELEROMETER_LABELS",
@@ -912,7 +912,7 @@ def reconstruct_rigid_body_motion(
     Examples
     --------
     >>> import numpy as np
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> lay = nine_accelerometer_layout(rx=0.1, ry=0.1, rz=0.1)
     >>> t = np.arange(1000) / 1000.0
     >>> q = np.outer(np.sin(2 * np.pi * 40 * t), [1.0, 0, 0, 0, 0, 5.0])
@@ -1035,7 +1035,7 @@ def model_rigid_body_motion(
     --------
     >>> import numpy as np
     >>> from cappe.model import load_model
-    >>> from cappe.io.timedata import TimeData
+    >>> from cappe.systems import TimeData
     >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
     >>> data = TimeData.from_rate(1000.0, {"F": np.ones(200)})
     >>> m = model_rigid_body_motion(nm, data, inputs={"F": "F1"})

@@ -19,7 +19,7 @@ from numpy.typing import ArrayLike, NDArray
 from cappe._arguments import is_numeric, positive_number, real_number
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
-from cappe.io.timedata import TimeData
+from cappe.systems.timedata import TimeData
 
 __all__ = [
     "SteppedSineSchedule",

@@ -21,7 +21,6 @@ from cappe.io.modal import (
     read_modal_data,
     write_modal_data,
 )
-from cappe.io.timedata import TimeData, check_clipping
 from cappe.io.uff import (
     UFF_FORMAT,
     read_uff_frf,
@@ -33,6 +32,7 @@ from cappe.io.uff import (
     write_uff_nodes,
     write_uff_time_data,
 )
+from cappe.systems.timedata import TimeData, check_clipping
 
 __all__ = [
     "FRF_NPZ_FORMAT",

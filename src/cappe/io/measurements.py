@@ -45,7 +45,6 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.io.files import atomic_path, finite_number, parse_json, read_text_file, shown, write_text
-from cappe.io.timedata import TimeData
 from cappe.io.uff import (
     COHERENCE,
     FRF,
@@ -60,6 +59,7 @@ from cappe.io.uff import (
     write_uff_time_data,
 )
 from cappe.systems.frf import FRFData
+from cappe.systems.timedata import TimeData
 
 __all__ = [
     "FRF_NPZ_FORMAT",

@@ -88,8 +88,8 @@ from numpy.typing import NDArray
 from cappe.exceptions import DataError, DataWarning
 from cappe.io.files import atomic_path
 from cappe.io.modal import MODAL_FORMAT, ModalData, modal_data_from_mapping
-from cappe.io.timedata import TimeData
 from cappe.systems.frf import FRFData
+from cappe.systems.timedata import TimeData
 
 __all__ = [
     "UFF_FORMAT",

@@ -35,7 +35,6 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import DataError
-from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, load_model
 from cappe.monitor._baseline import Baseline, learn_baseline
 from cappe.monitor._config import MonitorConfig, severity_rank
@@ -44,6 +43,7 @@ from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
 from cappe.monitor._estimation import FactorEstimate, FactorEstimator
 from cappe.monitor._features import frf_features, modal_features
 from cappe.systems.frf import FRFData
+from cappe.systems.timedata import TimeData
 
 __all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "ingest", "learn_store_baseline", "register_machine"]
 

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
-from cappe.io.timedata import TimeData
+from cappe.systems.timedata import TimeData
 
 __all__ = ["OUTPUT_UNITS", "time_response"]
 
