@@ -74,8 +74,7 @@ def settings(items: list[str]) -> dict[str, Any]:
 
 
 def _kind(data: Any) -> str:
-    from cappe.io import ModalData, TimeData
-    from cappe.systems import FRFData
+    from cappe.systems import FRFData, ModalData, TimeData
 
     if isinstance(data, TimeData):
         return "time"

@@ -21,9 +21,9 @@ from scipy.optimize import lsq_linear
 
 from cappe.estimate._validation import _pair
 from cappe.exceptions import DataError
-from cappe.io.modal import ModalData
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel
+from cappe.systems.modal import ModalData
 
 __all__ = ["DampingLeastSquares", "damping_least_squares"]
 

@@ -18,10 +18,10 @@ from numpy.typing import NDArray
 
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._validation import _pair
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine, exact_mode_derivatives
 from cappe.model import NumericModel
 from cappe.parallel import Executor
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ExactModalProblem"]
 

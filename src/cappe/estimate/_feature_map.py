@@ -41,9 +41,9 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["FeatureMapEstimator"]
 
@@ -73,7 +73,7 @@ class _Measured:
 class FeatureMapEstimator(Estimator):
     """Parameters from measured natural frequencies and damping ratios via a precomputed feature map.
 
-    ``FeatureMapEstimator(model, unknowns, ...).fit(data)`` with ``data`` a :class:`~cappe.io.ModalData`
+    ``FeatureMapEstimator(model, unknowns, ...).fit(data)`` with ``data`` a :class:`~cappe.systems.ModalData`
     (``cappe.modal/1``: frequencies and damping ratios at one or more axis positions) or a mapping
     ``{"frequency": [...], "damping": [...], "position": {...}}`` for one position.
 

@@ -825,7 +825,7 @@ def _symmetric(mat: NDArray[np.floating[Any]]) -> Array:
 class ExtendedKalmanEstimator(_KalmanEstimator):
     """Extended Kalman filter with the unknown parameters as augmented states (thesis 3.6.4).
 
-    ``ExtendedKalmanEstimator(model, unknowns, ...).fit(data)`` with ``data`` a :class:`~cappe.io.TimeData` whose
+    ``ExtendedKalmanEstimator(model, unknowns, ...).fit(data)`` with ``data`` a :class:`~cappe.systems.TimeData` whose
     channels are named like the model's inputs (forces) and outputs (displacements, velocities, accelerations).
     Model inputs without a channel are taken as unexcited.
 

@@ -13,8 +13,8 @@ from numpy.typing import NDArray
 
 from cappe.estimate._registry import METHODS, estimator_class
 from cappe.exceptions import ConvergenceWarning, DataWarning, ModelError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.model import NumericModel, Structure
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["StudyResult", "simulation_study", "simulate_data"]
 

@@ -44,10 +44,10 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe.correlate import ndd, nfd, pair_modes
 from cappe.exceptions import DataError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
 from cappe.parallel import chunk_slices
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ValidationResult", "find_set", "model_receptance", "summarize", "validate_identification"]
 

@@ -31,8 +31,8 @@ from cappe.identify._lscf import (
     lscf_poles,
     select_poles,
 )
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.systems.frf import FRFData
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ModalExtraction", "ModalFit", "extract_modes", "lsfd"]
 
@@ -151,7 +151,7 @@ class ModalFit:
         return FRFData(f, H, self.input_names, self.output_names, self.output_quantities)
 
     def to_modal_data(self, position: Mapping[str, float] | None = None) -> ModalData:
-        """The modes as :class:`cappe.io.modal.ModalData`, one set at ``position``; sensors are the output names."""
+        """The modes as :class:`cappe.systems.ModalData`, one set at ``position``; sensors are the output names."""
         data_set = ModalDataSet(
             dict(position or {}), self.frequency.copy(), self.damping.copy(), self.shapes.astype(complex)
         )

@@ -1,6 +1,6 @@
 """Excitation signals for vibration tests: sine, stepped sine, square wave, chirp, random noise, PRBS and impacts.
 
-Every generator is a keyword-only function that returns a single-channel :class:`~cappe.io.timedata.TimeData`
+Every generator is a keyword-only function that returns a single-channel :class:`~cappe.systems.TimeData`
 (channel ``name``, default ``"F"``, in ``unit``, default ``"N"``), sampled at ``fs`` Hz from t = 0. The stepped
 sine also has a :class:`SteppedSineSchedule` (frequency, start and settling time of each step) that
 :func:`cappe.identify._frf.stepped_sine_frf` uses to estimate the FRF line by line.

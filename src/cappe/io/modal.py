@@ -7,13 +7,14 @@
      "sets": [{"position": {"z": -0.294}, "frequency": [Hz, ...], "damping": [ratio, ...],
                "shape_re": [[per sensor] per mode], "shape_im": [[...] per mode]}, ...]}
 
-``shape_im`` may be omitted for real shapes.
+``shape_im`` may be omitted for real shapes. The data types, :class:`~cappe.systems.ModalData` and
+:class:`~cappe.systems.ModalDataSet`, live in :mod:`cappe.systems.modal`; this module reads, validates and writes
+them (and hands them on under their old names, ``cappe.io.modal.ModalData``).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -22,6 +23,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.io.files import finite_number, read_json, shown, write_json
+from cappe.systems.modal import MODAL_FORMAT, ModalData, ModalDataSet
 
 __all__ = [
     "MODAL_FORMAT",
@@ -31,70 +33,6 @@ __all__ = [
     "read_modal_data",
     "write_modal_data",
 ]
-
-MODAL_FORMAT = "cappe.modal/1"
-
-
-@dataclass(frozen=True)
-class ModalDataSet:
-    """Modes identified (or simulated) at one axis position.
-
-    Attributes
-    ----------
-    position : dict
-        Axis values, e.g. ``{"z": 0.135}`` (m); empty for a model without axes.
-    frequency : ndarray, shape (n_modes,)
-        Natural frequencies in Hz.
-    damping : ndarray, shape (n_modes,)
-        Damping ratios.
-    shapes : ndarray of complex, shape (n_sensors, n_modes)
-        Mode shapes at the sensors, one mode per column.
-    """
-
-    position: dict[str, float]
-    frequency: NDArray[np.float64]
-    damping: NDArray[np.float64]
-    shapes: NDArray[np.complex128]
-
-    @property
-    def n_modes(self) -> int:
-        return int(self.frequency.size)
-
-    @property
-    def poles(self) -> NDArray[np.complex128]:
-        """Poles ``-zeta omega + 1j omega sqrt(1 - zeta^2)`` in rad/s (omega = 2 pi f)."""
-        w = 2 * np.pi * self.frequency
-        z = self.damping
-        return np.asarray(-z * w + 1j * w * np.sqrt(np.clip(1 - z**2, 0, None)), dtype=complex)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {
-            "position": dict(self.position),
-            "frequency": self.frequency.tolist(),
-            "damping": self.damping.tolist(),
-            "shape_re": self.shapes.real.T.tolist(),
-            "shape_im": self.shapes.imag.T.tolist(),
-        }
-
-
-@dataclass(frozen=True)
-class ModalData:
-    """Modal data at one or more axis positions, all at the same sensor channels.
-
-    Examples
-    --------
-    >>> import numpy as np
-    >>> data = ModalData(("n1:x",), (ModalDataSet({}, np.array([10.0]), np.array([0.01]), np.ones((1, 1), complex)),))
-    >>> data.to_dict()["sets"][0]["frequency"]
-    [10.0]
-    """
-
-    sensors: tuple[str, ...]
-    sets: tuple[ModalDataSet, ...] = field(default=())
-    source: str = ""
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"format": MODAL_FORMAT, "sensors": list(self.sensors), "sets": [s.to_dict() for s in self.sets]}
 
 
 def _where(source: str, entry: str) -> str:

@@ -3,7 +3,7 @@
 What cappe writes and reads
 ---------------------------
 * **UFF 58** (ASCII ``58`` or binary ``58b``), one dataset per signal:
-  function type 1 (time response) for :class:`~cappe.io.timedata.TimeData` channels, function type 4 (frequency
+  function type 1 (time response) for :class:`~cappe.systems.TimeData` channels, function type 4 (frequency
   response function) per (output, input) pair of :class:`~cappe.systems.frf.FRFData` with *reference = input* and
   *response = output*, and function type 6 (coherence) per pair when ``FRFData.coherence`` is set.
   Multiple coherence (type 26) is read as the coherence of every pair of its response; pyuff cannot write it.
@@ -87,8 +87,9 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError, DataWarning
 from cappe.io.files import atomic_path
-from cappe.io.modal import MODAL_FORMAT, ModalData, modal_data_from_mapping
+from cappe.io.modal import modal_data_from_mapping
 from cappe.systems.frf import FRFData
+from cappe.systems.modal import MODAL_FORMAT, ModalData
 from cappe.systems.timedata import TimeData
 
 __all__ = [
@@ -1047,7 +1048,7 @@ def write_uff_modal(
     --------
     >>> import pathlib, tempfile
     >>> import numpy as np
-    >>> from cappe.io.modal import ModalDataSet
+    >>> from cappe.systems import ModalDataSet
     >>> s = ModalDataSet({"z": 0.1}, np.array([50.0]), np.array([0.02]), np.array([[1.0], [0.5 - 0.1j]]))
     >>> modal = ModalData(("tool:x", "tool:y"), (s,))
     >>> with tempfile.TemporaryDirectory() as tmp:
@@ -1158,7 +1159,7 @@ def read_uff_modal(path: str | Path) -> ModalData:
     --------
     >>> import pathlib, tempfile
     >>> import numpy as np
-    >>> from cappe.io.modal import ModalDataSet
+    >>> from cappe.systems import ModalDataSet
     >>> s = ModalDataSet({}, np.array([12.5, 40.0]), np.array([0.01, 0.03]), np.array([[1.0, 0.2], [-0.4, 1.0]]))
     >>> with tempfile.TemporaryDirectory() as tmp:
     ...     back = read_uff_modal(write_uff_modal(pathlib.Path(tmp) / "m.uff", ModalData(("1:z", "2:z"), (s,))))

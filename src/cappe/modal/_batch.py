@@ -9,8 +9,7 @@ import numpy as np
 import pandas as pd
 from numpy.typing import NDArray
 
-from cappe.io.modal import ModalDataSet
-from cappe.systems.modal import ModalSet
+from cappe.systems.modal import ModalDataSet, ModalSet
 
 __all__ = ["ModalBatch"]
 
@@ -121,7 +120,7 @@ class ModalBatch:
                         self.first_order_poles[sample], self.sensors, "first-order", self.frequency[sample] == 0)
 
     def data_set(self, sample: int = 0) -> ModalDataSet:
-        """One sample's modes as a :class:`cappe.io.ModalDataSet` (exact modes when computed).
+        """One sample's modes as a :class:`cappe.systems.ModalDataSet` (exact modes when computed).
 
         Modes without an exact oscillatory counterpart (rigid-body or overdamped) are left out.
         """

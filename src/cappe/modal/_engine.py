@@ -20,12 +20,12 @@ from numpy.typing import NDArray
 from scipy.optimize import linear_sum_assignment
 
 from cappe.exceptions import ModelError
-from cappe.io.modal import ModalData
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import DampingSources, NumericModel, ParamsLike
 from cappe.model.structure import Structure
 from cappe.model.symbolic import MATRIX_NAMES
 from cappe.parallel import Executor, map_chunks
+from cappe.systems.modal import ModalData
 
 if TYPE_CHECKING:
     from cappe.modal._derivatives import ModalDerivatives
@@ -237,7 +237,7 @@ class ModalEngine:
         *,
         exact: bool = True,
     ) -> ModalData:
-        """Modes at one parameter vector at several positions as :class:`cappe.io.ModalData`.
+        """Modes at one parameter vector at several positions as :class:`cappe.systems.ModalData`.
 
         Modes are tracked from position to position, so column r is the same physical mode at each; with
         ``exact`` the poles and complex shapes include all damping and gyroscopic terms.

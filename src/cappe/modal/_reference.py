@@ -45,11 +45,11 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal._engine import ModalEngine
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
 from cappe.systems.frf import FRFData
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["axis_positions", "reference_frf", "reference_modes", "sensor_coordinates"]
 

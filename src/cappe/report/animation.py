@@ -25,10 +25,9 @@ from cappe._arguments import positive_number
 from cappe.exceptions import DataError
 from cappe.identify._rigid_body import RIGID_BODY_DOFS, BodyGeometry, RigidBodyMotion, body_geometry
 from cappe.io.files import atomic_path, write_text
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal._batch import ModalBatch
 from cappe.model.numeric import NumericModel, ParamsLike
-from cappe.systems.modal import ModalSet
+from cappe.systems.modal import ModalData, ModalDataSet, ModalSet
 
 __all__ = ["animate_mode_shape", "animate_motion"]
 

@@ -22,12 +22,12 @@ from numpy.typing import ArrayLike, NDArray
 from cappe._rng import RandomLike
 from cappe.correlate import macxp_batch
 from cappe.exceptions import DataError, ModelError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalBatch, ModalEngine
 from cappe.model.numeric import NumericModel
 from cappe.model.structure import Structure
 from cappe.parallel import Executor
 from cappe.sensitivity._sobol import SobolResult, sobol_indices
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["CRITERIA", "ModelSobolResult", "model_sobol"]
 

@@ -13,10 +13,10 @@ import pandas as pd
 from numpy.typing import NDArray
 
 from cappe.exceptions import DataError, ModelError
-from cappe.io.modal import ModalData
 from cappe.modal import ModalDerivatives, ModalEngine
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
+from cappe.systems.modal import ModalData
 
 __all__ = [
     "CostLandscape",

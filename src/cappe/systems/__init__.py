@@ -3,7 +3,7 @@ data types measured or simulated responses are handed around in (FRFs, time data
 
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import MechanicalSystem
-from cappe.systems.modal import ModalSet
+from cappe.systems.modal import ModalData, ModalDataSet, ModalSet
 from cappe.systems.statespace import StateSpaceModel, simulate
 from cappe.systems.timedata import TimeData, check_clipping
 from cappe.systems.timeresponse import OUTPUT_UNITS, time_response
@@ -14,6 +14,8 @@ __all__ = [
     "FRFData",
     "OUTPUT_UNITS",
     "MechanicalSystem",
+    "ModalData",
+    "ModalDataSet",
     "ModalSet",
     "StateSpaceModel",
     "TimeData",

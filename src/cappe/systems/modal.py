@@ -1,4 +1,14 @@
-"""Modal models: natural frequencies, damping ratios and mode shapes."""
+"""Modes as data: natural frequencies, damping ratios and mode shapes.
+
+Two containers, one purpose each (the other modal results hold more and convert into these):
+
+* :class:`ModalSet` - the modes of one system (one parameter vector, one axis position) at its labelled
+  coordinates, with the method that computed them and the rigid-body flags: what ``MechanicalSystem.modes``
+  returns and ``cappe model modes`` prints.
+* :class:`ModalData` of :class:`ModalDataSet` - modes at named sensor channels at one or more axis positions:
+  measured, extracted or simulated reference modes, the ``"cappe.modal/1"`` document that :mod:`cappe.io` reads
+  and writes (JSON, UFF 55) and that estimators and criteria compare a model with.
+"""
 
 from __future__ import annotations
 
@@ -8,7 +18,10 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["ModalSet"]
+__all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "ModalSet"]
+
+#: Format string of modal data documents (:meth:`ModalData.to_dict`; read and written by :mod:`cappe.io`).
+MODAL_FORMAT = "cappe.modal/1"
 
 
 @dataclass(frozen=True)
@@ -66,3 +79,77 @@ class ModalSet:
                 entry["rigid"] = True
             modes.append(entry)
         return {"method": self.method, "dofs": list(self.dofs), "modes": modes}
+
+
+@dataclass(frozen=True)
+class ModalDataSet:
+    """Modes identified (or simulated) at one axis position.
+
+    Attributes
+    ----------
+    position : dict
+        Axis values, e.g. ``{"z": 0.135}`` (m); empty for a model without axes.
+    frequency : ndarray, shape (n_modes,)
+        Natural frequencies in Hz.
+    damping : ndarray, shape (n_modes,)
+        Damping ratios.
+    shapes : ndarray of complex, shape (n_sensors, n_modes)
+        Mode shapes at the sensors, one mode per column.
+    """
+
+    position: dict[str, float]
+    frequency: NDArray[np.float64]
+    damping: NDArray[np.float64]
+    shapes: NDArray[np.complex128]
+
+    @property
+    def n_modes(self) -> int:
+        return int(self.frequency.size)
+
+    @property
+    def poles(self) -> NDArray[np.complex128]:
+        """Poles ``-zeta omega + 1j omega sqrt(1 - zeta^2)`` in rad/s (omega = 2 pi f)."""
+        w = 2 * np.pi * self.frequency
+        z = self.damping
+        return np.asarray(-z * w + 1j * w * np.sqrt(np.clip(1 - z**2, 0, None)), dtype=complex)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "position": dict(self.position),
+            "frequency": self.frequency.tolist(),
+            "damping": self.damping.tolist(),
+            "shape_re": self.shapes.real.T.tolist(),
+            "shape_im": self.shapes.imag.T.tolist(),
+        }
+
+
+@dataclass(frozen=True)
+class ModalData:
+    """Modal data at one or more axis positions, all at the same sensor channels.
+
+    Read and written by :mod:`cappe.io` (``read_modal_data`` / ``write_modal_data``, UFF 55); ``to_dict`` is the
+    ``"cappe.modal/1"`` document.
+
+    Attributes
+    ----------
+    sensors : tuple of str
+        Sensor channel labels ``"node:direction"``, one per row of every set's ``shapes``.
+    sets : tuple of ModalDataSet
+        The modes at each axis position.
+    source : str
+        Where the data came from (a file name), for messages; empty when built in memory.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> data = ModalData(("n1:x",), (ModalDataSet({}, np.array([10.0]), np.array([0.01]), np.ones((1, 1), complex)),))
+    >>> data.to_dict()["sets"][0]["frequency"]
+    [10.0]
+    """
+
+    sensors: tuple[str, ...]
+    sets: tuple[ModalDataSet, ...] = field(default=())
+    source: str = ""
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"format": MODAL_FORMAT, "sensors": list(self.sensors), "sets": [s.to_dict() for s in self.sets]}
