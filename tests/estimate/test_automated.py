@@ -25,13 +25,14 @@ from cappe.estimate import (
     select_stiffness,
     solve_subproblem,
 )
-from cappe.estimate._automated import _derangement
+from cappe.estimate._automated_steps import _derangement
 from cappe.estimate._subproblems import _mode_problem
 from cappe.estimate._validation import model_receptance, summarize, validate_identification
 from cappe.exceptions import DataError, ModelError
 from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, load_model
+from cappe.report import write_html_report
 
 #: The small slide model shared with tests/cli/test_identify_cli.py (see tests/data/README.md).
 BENCH = Path(__file__).parents[1] / "data" / "bench-slide.yaml"
@@ -132,6 +133,42 @@ def test_ideal_case_validation_and_permuted_damping(ideal):
         assert p.position == {"z": -0.2}
         assert p.statistics()["ndd"]["mean"] > 100 * stats["ndd"]["mean"]
         assert p.statistics()["frac"]["mean"] < stats["frac"]["mean"]
+
+
+def test_typed_result_is_the_document_it_writes(ideal, tmp_path):
+    # every step's typed result, and the cappe.estimate/1 document made from them (what `cappe identify -o` writes)
+    est, _, _ = ideal
+    result = est.result_
+    doc = result.to_dict()
+    assert json.dumps(doc) == json.dumps(est.estimate_.to_dict())
+    diag = doc["diagnostics"]
+    assert result.costs == diag["costs"]
+    assert result.costs["final"] == result.joint.cost_after <= result.joint.cost_before
+    assert result.identification_positions == ({"z": 0.0}, {"z": 0.15}, {"z": 0.3})
+    assert result.validation_position == {"z": -0.2}
+    first = result.gsa.outputs[0]
+    assert (first.set_index, first.mode, first.criterion) == (0, 1, "macxp")
+    assert result.gsa.output(0, 1, "macxp") is first
+    assert list(first.significant) == diag["gsa"]["outputs"][0]["significant"]
+    assert {n: c.value for n, c in result.stiffness.selection.items()} == {
+        n: s["value"] for n, s in diag["selection"].items()}
+    assert result.refinement is not None
+    assert result.refinement.runs[0].start == "selection"
+    assert result.refinement.cost_before == diag["stiffness_refinement"]["cost_before"]
+    assert result.damping is est.damping_
+    assert result.validation.held is est.validation_["validation"]
+    assert len(result.validation.assignments) == len(result.validation.permuted) == 2
+    assert result.joint.cost_function is est.cost_function_
+    assert list(result.timings) == ["gsa", "stiffness_subproblems", "stiffness_refinement", "damping_least_squares",
+                                    "joint_refinement", "validation", "total"]
+    # the report reads the typed result; a bare estimate with the validation mapping still gives its sections
+    full = write_html_report(tmp_path / "full.html", result=result).read_text()
+    for section in ("<h2>Stages</h2>", "<h2>Global sensitivity</h2>", "<h2>Stiffness subproblems</h2>",
+                    "held-out position z = -0.2", "permuted damping (2 random"):
+        assert section in full
+    bare = write_html_report(tmp_path / "bare.html", result=est.estimate_, validation=est.validation_).read_text()
+    assert "held-out position z = -0.2" in bare
+    assert "<h2>Stages</h2>" not in bare
 
 
 def test_gsa_significant_sets_contain_the_locally_dominant_parameters(ideal, bench):
@@ -534,7 +571,7 @@ def test_warnings_raised_on_executor_threads_reach_the_diagnostics_in_a_fixed_or
     import warnings
     from concurrent.futures import ThreadPoolExecutor
 
-    from cappe.estimate._automated import _recorded_warnings
+    from cappe.estimate._automated_steps import _recorded_warnings
 
     caught: list[str] = []
     with _recorded_warnings(caught, sort=True), ThreadPoolExecutor(2) as pool:

@@ -101,17 +101,19 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
                                 n_modes=20)
     estimator = AutomatedIdentification(machine, n_gsa=args.n_gsa, n_opt=args.n_opt, validation={"z": -0.294},
                                         truth=truth, rng=args.seed)
-    result = estimator.fit(reference).estimate_
-    write_html_report(args.report, result=result, gsa=estimator.gsa_, validation=estimator.validation_, truth=truth,
+    estimator.fit(reference)
+    identified = estimator.result_
+    write_html_report(args.report, result=identified, truth=truth,
                       title="uniaxial machine tool: automated identification (ideal case)")
     elapsed = time.perf_counter() - t0
+    result = identified.estimate
     errors = result.relative_error(truth)
     data["identification"] = {"truth": truth, "estimate": result.parameters, "relative_error": errors,
                               "runtime_s": elapsed, "report": args.report}
     return [
         "== uniaxial machine tool (Ellinger & Zaeh 2022, 3.1): automated identification, ideal case ==",
         f"random truth within the bounds (seed {args.seed}), noise-free reference: 20 modes at 4 positions",
-        summary_text(result, truth, "uniaxial-machine-tool"),
+        summary_text(identified, truth, "uniaxial-machine-tool"),
         f"identification done in {elapsed:.1f} s; report written to {args.report}",
     ]
 

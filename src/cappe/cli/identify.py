@@ -12,11 +12,14 @@ import argparse
 import math
 import sys
 import warnings
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from cappe.cli._common import UsageError, emit, names, number_pairs
+
+if TYPE_CHECKING:
+    from cappe.estimate import AutomatedResult, ParameterEstimate
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -132,13 +135,12 @@ def run(args: argparse.Namespace) -> int:
         estimator.fit(reference)
     for w in caught:
         print(f"cappe: warning: {w.message}", file=sys.stderr)
-    result = estimator.estimate_
+    result = estimator.result_
     doc = result.to_dict()
     if args.report:
         from cappe.report.html import write_html_report
 
-        write_html_report(args.report, result=result, gsa=estimator.gsa_, validation=estimator.validation_,
-                          truth=truth, title=f"{structure.name}: automated identification")
+        write_html_report(args.report, result=result, truth=truth, title=f"{structure.name}: automated identification")
         doc["diagnostics"]["report"] = args.report
     text = summary_text(result, truth, structure.name)
     if args.report:
@@ -146,7 +148,7 @@ def run(args: argparse.Namespace) -> int:
     if args.out:
         text += f"\nresult (cappe.estimate/1) written to {args.out}"
     emit(args, doc, text)
-    return 0 if result.success else 1
+    return 0 if result.estimate.success else 1
 
 
 def _row_stats(label: str, stats: dict[str, dict[str, float]]) -> list[str]:
@@ -158,22 +160,42 @@ def _row_stats(label: str, stats: dict[str, dict[str, float]]) -> list[str]:
     return lines
 
 
-def summary_text(result: Any, truth: dict[str, float] | None, model_name: str) -> str:
+def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_name: str) -> str:
     """The printed summary of an automated identification (also used by ``cappe demo``)."""
-    diag = result.diagnostics
-    settings = diag.get("settings", {})
-    lines = [f"{model_name}: automated identification of {len(result.names)} unknowns "
-             f"(n_gsa {settings.get('n_gsa')}, n_opt {settings.get('n_opt')}, threshold {settings.get('threshold')})",
-             f"identification positions: {diag.get('identification_positions')}; "
-             f"validation position: {diag.get('validation_position')}"]
+    estimate, settings = result.estimate, result.settings
+    lines = [f"{model_name}: automated identification of {len(estimate.names)} unknowns "
+             f"(n_gsa {settings.n_gsa}, n_opt {settings.n_opt}, threshold {settings.threshold})",
+             f"identification positions: {list(result.identification_positions)}; "
+             f"validation position: {result.validation_position}"]
+    lines += _parameter_rows(estimate, truth)
+    lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
+    val = result.validation
+    if val.held is not None:
+        lines += _row_stats(f"validation at {val.held.position}", val.held.statistics())
+    pooled = val.identification_statistics()
+    if pooled:
+        lines += _row_stats("identification positions", pooled)
+    if val.permuted:
+        means = {c: float(np.mean([p.statistics()[c]["mean"] for p in val.permuted])) for c in
+                 ("frac", "csf", "macxp", "ndd")}
+        lines.append(f"permuted damping ({len(val.permuted)} reassignments), mean: "
+                     + ", ".join(f"{c.upper()} {100 * v:.2f} %" for c, v in means.items()))
+    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
+    if not estimate.success:
+        lines.append(f"not converged: {estimate.message}")
+    return "\n".join(lines)
+
+
+def _parameter_rows(estimate: ParameterEstimate, truth: dict[str, float] | None) -> list[str]:
+    """The parameter table: estimate and relative standard error, with the truth and the error when known."""
     header = f"  {'parameter':<12}{'estimate':>13}{'std %':>9}"
     if truth is not None:
         header += f"{'truth':>13}{'error %':>10}"
-    lines.append(header)
+    lines = [header]
     errors = []
-    for k, name in enumerate(result.names):
-        value = float(result.values[k])
-        std = float(result.std[k])
+    for k, name in enumerate(estimate.names):
+        value = float(estimate.values[k])
+        std = float(estimate.std[k])
         row = f"  {name:<12}{value:>13.5g}{(100 * std / abs(value) if np.isfinite(std) and value else math.nan):>9.3g}"
         if truth is not None and name in truth:
             err = 100 * (value / truth[name] - 1)
@@ -182,20 +204,4 @@ def summary_text(result: Any, truth: dict[str, float] | None, model_name: str) -
         lines.append(row)
     if errors:
         lines.append(f"  worst |error| {max(errors):.3g} %")
-    costs = diag.get("costs", {})
-    lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in costs.items() if v is not None))
-    val = diag.get("validation", {})
-    if val.get("validation"):
-        lines += _row_stats(f"validation at {val['validation']['position']}", val["validation"]["statistics"])
-    if val.get("identification_statistics"):
-        lines += _row_stats("identification positions", val["identification_statistics"])
-    if val.get("permuted"):
-        means = {c: float(np.mean([p["statistics"][c]["mean"] for p in val["permuted"]])) for c in
-                 ("frac", "csf", "macxp", "ndd")}
-        lines.append(f"permuted damping ({len(val['permuted'])} reassignments), mean: "
-                     + ", ".join(f"{c.upper()} {100 * v:.2f} %" for c, v in means.items()))
-    timings = diag.get("timings", {})
-    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in timings.items()))
-    if not result.success:
-        lines.append(f"not converged: {result.message}")
-    return "\n".join(lines)
+    return lines

@@ -2,6 +2,17 @@
 imported here (lazy_loader reads these imports); type checkers read the imports and ``__all__``."""
 
 from ._automated import DAMPING_KINDS, AutomatedIdentification
+from ._automated_result import (
+    AutomatedResult,
+    AutomatedSettings,
+    GSAStage,
+    IdentificationValidation,
+    JointRefinement,
+    RefinementRun,
+    SensitivityOutput,
+    StiffnessRefinement,
+    StiffnessSearch,
+)
 from ._base import CostFunction, Estimator, fit_least_squares
 from ._damping_least_squares import DampingLeastSquares, damping_least_squares
 from ._direct import DirectEstimator
@@ -23,7 +34,7 @@ from ._resampling import (
 from ._result import ESTIMATE_FORMAT, ParameterEstimate, read_estimate, write_estimate
 from ._space import ParameterSpace
 from ._study import StudyResult, simulate_data, simulation_study
-from ._subproblems import SubproblemResult, select_stiffness, solve_subproblem
+from ._subproblems import StiffnessChoice, SubproblemResult, select_stiffness, solve_subproblem
 from ._two_step import TwoStepTFEstimator, TwoStepZPKEstimator, model_transfer_functions
 from ._uncertainty import LocalUncertainty, jacobian_uncertainty
 from ._validation import ValidationResult, find_set, model_receptance, summarize, validate_identification
@@ -31,6 +42,16 @@ from ._validation import ValidationResult, find_set, model_receptance, summarize
 __all__ = [
     "DAMPING_KINDS",
     "AutomatedIdentification",
+    "AutomatedResult",
+    "AutomatedSettings",
+    "GSAStage",
+    "IdentificationValidation",
+    "JointRefinement",
+    "RefinementRun",
+    "SensitivityOutput",
+    "StiffnessChoice",
+    "StiffnessRefinement",
+    "StiffnessSearch",
     "DampingLeastSquares",
     "ExactModalProblem",
     "SubproblemResult",

@@ -212,6 +212,36 @@ class ModalUpdatingEstimator(Estimator):
         return _Pairing(model_of, crit, criterion)
 
     # -- the fit -------------------------------------------------------------------------------------------
+    def residuals(self, data: Any, values: Mapping[str, float] | None = None) -> Array:
+        """The residual vector (see the module notes) for ``data`` at ``values`` of the unknowns (default: the
+        start), without fitting: ``|r|^2`` is the cost :meth:`fit` minimizes.
+
+        Parameters
+        ----------
+        data : ModalData
+            Reference modes.
+        values : mapping name -> float, optional
+            Every unknown's value (SI).
+
+        Returns
+        -------
+        ndarray, shape (n_residuals,)
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> model = load_model("builtin:two-mass-rig")
+        >>> reference = ModalEngine(model).modal_data(params={"k11": 1.6e6}, exact=False)
+        >>> r = ModalUpdatingEstimator(model, ["k11"]).residuals(reference, {"k11": 1.6e6})
+        >>> bool(r @ r < 1e-20)
+        True
+        """
+        numeric = self.model if isinstance(self.model, NumericModel) else NumericModel(self.model)
+        space = ParameterSpace.from_model(numeric, self.unknowns, bounds=self.bounds, start=self.start,
+                                          values=self.values)
+        p = space.start if values is None else space.vector(values)
+        return self._problem(numeric, space, data).residuals(p)
+
     def _problem(self, model: NumericModel, space: ParameterSpace, data: Any) -> _ModalProblem:
         """Residuals, analytic Jacobian and pairings over the unknowns (SI vectors), re-paired at every point."""
         w_f, w_z, w_s = self._check(model, data)

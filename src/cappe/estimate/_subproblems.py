@@ -25,7 +25,7 @@ from cappe.modal import ModalEngine
 from cappe.modal._derivatives import REPEATED_TOLERANCE
 from cappe.model import NumericModel
 
-__all__ = ["SubproblemResult", "select_stiffness", "solve_subproblem"]
+__all__ = ["StiffnessChoice", "SubproblemResult", "select_stiffness", "solve_subproblem"]
 
 Array = NDArray[np.float64]
 _STEP = 1e-6  # relative step of the central differences of M and K (exact for matrices affine in a parameter)
@@ -346,13 +346,50 @@ def _levenberg_marquardt(problem: Callable[[Array], tuple[Array, Array]], p: Arr
 
 
 
+@dataclass(frozen=True)
+class StiffnessChoice:
+    """The value of one modal unknown taken from the subproblem where its optimum spreads least (paper 2.3.2).
+
+    Attributes
+    ----------
+    name : str
+    value, mean : float
+        Median and mean of the runs of the chosen subproblem (SI).
+    spread : float
+        Their relative standard deviation.
+    subproblem : int
+        Index of the chosen subproblem.
+    mode : int
+        Its reference mode (1-based).
+    position : dict
+        Its axis position.
+    searched_in : int
+        Subproblems that searched the unknown.
+    """
+
+    name: str
+    value: float
+    mean: float
+    spread: float
+    subproblem: int
+    mode: int
+    position: dict[str, float]
+    searched_in: int
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"value": self.value, "mean": self.mean, "spread": self.spread, "subproblem": self.subproblem,
+                "mode": self.mode, "position": dict(self.position), "searched_in": self.searched_in}
+
+
+
 def select_stiffness(
     subproblems: Sequence[SubproblemResult], names: Sequence[str]
 ) -> dict[str, dict[str, Any]]:
     """The paper's selection: for each name, the subproblem with the least relative spread; its median.
 
     Returns ``{name: {"value", "mean", "spread", "subproblem", "mode", "position", "searched_in"}}`` for the
-    names searched in at least one subproblem where fewer than half of the runs ended at a bound.
+    names searched in at least one subproblem where fewer than half of the runs ended at a bound
+    (:meth:`StiffnessChoice.to_dict`).
 
     Examples
     --------
@@ -361,7 +398,12 @@ def select_stiffness(
     >>> select_stiffness([a, b], ["k"])["k"]["value"]
     2.0
     """
-    out: dict[str, dict[str, Any]] = {}
+    return {name: choice.to_dict() for name, choice in choose_stiffness(subproblems, names).items()}
+
+
+def choose_stiffness(subproblems: Sequence[SubproblemResult], names: Sequence[str]) -> dict[str, StiffnessChoice]:
+    """:func:`select_stiffness` as typed records."""
+    out: dict[str, StiffnessChoice] = {}
     for name in names:
         best: tuple[float, int, int] | None = None
         count = 0
@@ -379,11 +421,9 @@ def select_stiffness(
             continue
         spread, s, i = best
         sub = subproblems[s]
-        out[name] = {"value": float(sub.median[i]), "mean": float(np.mean(sub.values[:, i])), "spread": spread,
-                     "subproblem": s, "mode": sub.mode, "position": dict(sub.position), "searched_in": count}
+        out[name] = StiffnessChoice(name, float(sub.median[i]), float(np.mean(sub.values[:, i])), spread, s,
+                                    sub.mode, dict(sub.position), count)
     return out
-
-
 
 
 def _alternative_starts(

@@ -214,7 +214,7 @@ def write_html_report(
     *,
     result: Any,
     gsa: Any | None = None,
-    validation: Mapping[str, Any] | None = None,
+    validation: Any | None = None,
     truth: Mapping[str, float] | None = None,
     title: str | None = None,
     top: int = 10,
@@ -226,14 +226,16 @@ def write_html_report(
     ----------
     path : str or Path
         Target file.
-    result : ParameterEstimate
-        The identification result (``AutomatedIdentification.estimate_``; other estimators' results give the
-        parameter table only).
+    result : AutomatedResult or ParameterEstimate
+        The identification: ``AutomatedIdentification.result_`` gives the whole report (stages, sensitivity,
+        subproblem selection, validation); another estimator's ``ParameterEstimate`` gives the parameter table and
+        the sections of ``gsa`` and ``validation`` when given.
     gsa : ModelSobolResult, optional
-        The GSA (``AutomatedIdentification.gsa_``): sensitivity map and Sobol' bars.
-    validation : mapping, optional
-        ``AutomatedIdentification.validation_``: ``{"validation": ValidationResult or None, "identification":
-        [ValidationResult], "permuted": [ValidationResult]}``.
+        Sensitivity map and Sobol' bars (default: the automated identification's).
+    validation : IdentificationValidation or mapping, optional
+        Validation sections (default: the automated identification's); a mapping as
+        ``AutomatedIdentification.validation_`` gives it is accepted: ``{"validation": ValidationResult or None,
+        "identification": [ValidationResult], "permuted": [ValidationResult]}``.
     truth : mapping, optional
         True parameter values (simulated reference): errors and deviation histograms.
     title : str, optional
@@ -256,66 +258,80 @@ def write_html_report(
     >>> "<table>" in text and "+0.000" in text
     True
     """
-    diag: Mapping[str, Any] = result.diagnostics or {}
+    from cappe.estimate import AutomatedResult, IdentificationValidation
+
+    identified = result if isinstance(result, AutomatedResult) else None
+    estimate = result.estimate if identified is not None else result
+    if identified is not None:
+        gsa = identified.gsa.sobol if gsa is None else gsa
+        validation = identified.validation if validation is None else validation
+    if isinstance(validation, Mapping):  # AutomatedIdentification.validation_
+        permuted = tuple(validation.get("permuted") or ())
+        validation = IdentificationValidation(validation.get("validation"),
+                                              tuple(validation.get("identification") or ()), permuted,
+                                              tuple({} for _ in permuted)) if validation else None
     parts = [f"<h1>{_e(title or 'cappe identification report')}</h1>",
-             f"<p>method <b>{_e(result.method)}</b>, cost {_num(result.cost)}, "
-             f"{'converged' if result.success else '<span class=bad>not converged</span>'}"
-             f"{': ' + _e(result.message) if result.message else ''}</p>"]
-    positions = diag.get("identification_positions")
-    if positions:
-        parts.append(f"<p>identification positions: {_e('; '.join(_label(p) for p in positions))}; "
-                     f"validation position: {_e(_label(diag.get('validation_position')))}</p>")
-    parts.append("<h2>Parameters</h2>" + _parameters(result, truth))
-    timings = diag.get("timings")
-    costs = diag.get("costs")
-    if timings or costs:
+             f"<p>method <b>{_e(estimate.method)}</b>, cost {_num(estimate.cost)}, "
+             f"{'converged' if estimate.success else '<span class=bad>not converged</span>'}"
+             f"{': ' + _e(estimate.message) if estimate.message else ''}</p>"]
+    if identified is not None and identified.identification_positions:
+        parts.append(f"<p>identification positions: "
+                     f"{_e('; '.join(_label(p) for p in identified.identification_positions))}; "
+                     f"validation position: {_e(_label(identified.validation_position))}</p>")
+    parts.append("<h2>Parameters</h2>" + _parameters(estimate, truth))
+    if identified is not None:
         parts.append("<h2>Stages</h2>")
-        if costs:
-            parts.append(_table(["stage", "cost"], [[_e(k), _num(v)] for k, v in costs.items()]))
-        if timings:
-            parts.append(_table(["stage", "seconds"], [[_e(k), _num(v, ".3g")] for k, v in timings.items()]))
+        parts.append(_table(["stage", "cost"], [[_e(k), _num(v)] for k, v in identified.costs.items()]))
+        parts.append(_table(["stage", "seconds"], [[_e(k), _num(v, ".3g")] for k, v in identified.timings.items()]))
     if truth is not None:
-        groups = {"stiffness": diag.get("stiffness_unknowns") or [], "damping": diag.get("damping_unknowns") or []}
-        if not any(groups.values()):
-            groups = {"all": list(result.names)}
-        figure = _histograms(result, truth, groups)
+        groups = {"all": list(estimate.names)}
+        if identified is not None and (identified.stiffness_unknowns or identified.damping_unknowns):
+            groups = {"stiffness": list(identified.stiffness_unknowns), "damping": list(identified.damping_unknowns)}
+        figure = _histograms(estimate, truth, groups)
         if figure:
             parts.append("<h2>Deviation from the truth</h2>" + figure)
     if gsa is not None:
-        threshold = float((diag.get("gsa") or {}).get("threshold", 0.01))
         parts.append("<h2>Global sensitivity</h2>")
-        parts.append(_sensitivity_map(gsa, threshold))
+        parts.append(_sensitivity_map(gsa, identified.gsa.threshold if identified is not None else 0.01))
         parts.append(_sobol_bars(gsa, top, max_sobol_panels))
-    selection = diag.get("selection")
-    if selection:
-        rows = [[_e(n), _num(s["value"]), _num(100 * s["spread"], ".3g"), str(s["mode"]), _e(_label(s["position"])),
-                 str(s["searched_in"])] for n, s in selection.items()]
-        parts.append("<h2>Stiffness subproblems</h2><p class=note>For each parameter the mode-position subproblem "
-                     "with the least spread of its optimum over the runs (paper section 2.3.2).</p>")
-        parts.append(_table(["parameter", "median", "spread %", "mode", "position", "subproblems"], rows))
-    if validation:
-        parts.append("<h2>Validation</h2>")
-        held = validation.get("validation")
-        ident = list(validation.get("identification") or [])
-        permuted = list(validation.get("permuted") or [])
-        if held is not None:
-            parts.append(_statistics(f"held-out position {_label(held.position)}", held.statistics()))
-        pooled = diag.get("validation", {}).get("identification_statistics") if isinstance(
-            diag.get("validation"), Mapping) else None
-        if pooled:
-            parts.append(_statistics("identification positions", pooled))
-        if permuted:
-            rows = [[_e(c)] + [_num(100 * np.mean([p.statistics()[c][k] for p in permuted]), ".2f")
-                               for k in ("worst", "mean")] for c in ("frac", "csf", "macxp", "ndd")]
-            parts.append(f"<p>permuted damping ({len(permuted)} random reassignments of the identified damping "
-                         f"factors, at {_e(_label(permuted[0].position))}; averages)</p>")
-            parts.append(_table(["criterion", "worst %", "mean %"], rows))
-        target = held if held is not None else (ident[0] if ident else None)
-        if target is not None:
-            parts.append("<h3>FRF overlay</h3>" + _overlay(target, permuted))
-        shown = ([held] if held is not None else []) + ident
-        if shown:
-            parts.append("<h3>MACXP matrices</h3>" + _macxp_matrices(shown))
+    if identified is not None and identified.stiffness.selection:
+        parts.append(_selection(identified.stiffness.selection))
+    if validation is not None:
+        parts += _validation(validation)
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title or 'cappe report')}</title>"
             f"<style>{_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
     return write_text(path, page)
+
+
+def _selection(selection: Mapping[str, Any]) -> str:
+    """The paper's subproblem selection: per modal unknown, the least-spread subproblem's median."""
+    rows = [[_e(n), _num(s.value), _num(100 * s.spread, ".3g"), str(s.mode), _e(_label(s.position)),
+             str(s.searched_in)] for n, s in selection.items()]
+    return ("<h2>Stiffness subproblems</h2><p class=note>For each parameter the mode-position subproblem "
+            "with the least spread of its optimum over the runs (paper section 2.3.2).</p>"
+            + _table(["parameter", "median", "spread %", "mode", "position", "subproblems"], rows))
+
+
+def _validation(validation: Any) -> list[str]:
+    """Statistics at the held-out and identification positions, the permuted-damping comparison, the FRF overlay
+    and the MACXP matrices."""
+    parts = ["<h2>Validation</h2>"]
+    held, ident, permuted = validation.held, list(validation.identification), list(validation.permuted)
+    if held is not None:
+        parts.append(_statistics(f"held-out position {_label(held.position)}", held.statistics()))
+    pooled = validation.identification_statistics()
+    if pooled:
+        parts.append(_statistics("identification positions", pooled))
+    if permuted:
+        rows = [[_e(c)] + [_num(100 * np.mean([p.statistics()[c][k] for p in permuted]), ".2f")
+                           for k in ("worst", "mean")] for c in ("frac", "csf", "macxp", "ndd")]
+        parts.append(f"<p>permuted damping ({len(permuted)} random reassignments of the identified damping "
+                     f"factors, at {_e(_label(permuted[0].position))}; averages)</p>")
+        parts.append(_table(["criterion", "worst %", "mean %"], rows))
+    target = held if held is not None else (ident[0] if ident else None)
+    if target is not None:
+        parts.append("<h3>FRF overlay</h3>" + _overlay(target, permuted))
+    shown = ([held] if held is not None else []) + ident
+    if shown:
+        parts.append("<h3>MACXP matrices</h3>" + _macxp_matrices(shown))
+    return parts

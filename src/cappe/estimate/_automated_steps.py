@@ -1,0 +1,394 @@
+"""The steps of the automated identification, each a function from the setup (and the previous steps' results)
+to its typed result (:mod:`cappe.estimate._automated_result`); :func:`run_pipeline` runs them in order and times
+them. The maths of steps 2 and 4 is in :mod:`~cappe.estimate._subproblems` and
+:mod:`~cappe.estimate._damping_least_squares`, that of the exact-mode refinement in
+:mod:`~cappe.estimate._exact_modal`; see :class:`~cappe.estimate.AutomatedIdentification` for the pipeline.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import time
+import warnings
+from collections.abc import Callable, Iterator
+from dataclasses import dataclass
+from typing import Any, TypeVar
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cappe.estimate._automated_result import (
+    AutomatedResult,
+    AutomatedSettings,
+    GSAStage,
+    IdentificationValidation,
+    JointRefinement,
+    RefinementRun,
+    SensitivityOutput,
+    StiffnessRefinement,
+    StiffnessSearch,
+)
+from cappe.estimate._base import least_squares_fit
+from cappe.estimate._damping_least_squares import DampingLeastSquares, damping_least_squares
+from cappe.estimate._exact_modal import ExactModalProblem
+from cappe.estimate._modal_updating import ModalUpdatingEstimator
+from cappe.estimate._space import ParameterSpace
+from cappe.estimate._subproblems import SubproblemResult, _alternative_starts, choose_stiffness, solve_subproblem
+from cappe.estimate._validation import ValidationResult, _truth_receptance, validate_identification
+from cappe.io.modal import ModalData
+from cappe.modal import ModalEngine
+from cappe.model import NumericModel
+from cappe.parallel import Executor, chunk_slices
+
+__all__ = ["Setup", "run_pipeline"]
+
+Array = NDArray[np.float64]
+_T = TypeVar("_T")
+#: Parameter kinds identified by the damping step; every other unknown is found from frequencies and shapes.
+DAMPING_KINDS = ("damping", "loss")
+
+
+@dataclass(frozen=True)
+class Setup:
+    """What every step reads: the model, the unknowns, the reference and its split, the settings, where to run.
+
+    ``base_model`` is ``model`` with the known parameters' values as its nominal vector: the GSA evaluates the
+    model there, and the subproblems' engine reduces the nominal mass matrix once per position.
+    """
+
+    method: str
+    model: NumericModel
+    base_model: NumericModel
+    space: ParameterSpace
+    data: ModalData
+    ident: tuple[int, ...]
+    held: int | None
+    settings: AutomatedSettings
+    runner: Executor
+    n_workers: int | None
+    progress: bool
+
+    @property
+    def ident_ref(self) -> ModalData:
+        """The identification sets only."""
+        return ModalData(self.data.sensors, tuple(self.data.sets[k] for k in self.ident), self.data.source)
+
+    @property
+    def damping_unknowns(self) -> list[str]:
+        structure = self.model.structure
+        return [n for n in self.space.names if structure.parameter(n).kind in DAMPING_KINDS]
+
+    @property
+    def modal_unknowns(self) -> list[str]:
+        structure = self.model.structure
+        return [n for n in self.space.names if structure.parameter(n).kind not in DAMPING_KINDS]
+
+    def bar(self, total: int, desc: str, unit: str) -> Any:
+        """A progress bar (tqdm on stderr), silent unless ``progress``."""
+        from tqdm.auto import tqdm
+
+        return tqdm(total=total, desc=desc, unit=unit, disable=not self.progress)
+
+
+def run_pipeline(setup: Setup, rng: np.random.Generator) -> AutomatedResult:
+    """GSA, stiffness subproblems, stiffness refinement, damping least squares, joint refinement, validation."""
+    t_total = time.perf_counter()
+    timings: dict[str, float] = {}
+    caught: list[str] = []
+    ident_ref = setup.ident_ref
+    seeds = rng.integers(1, 2**31, size=4)
+
+    def timed(name: str, step: Callable[[], _T]) -> _T:
+        t = time.perf_counter()
+        out = step()
+        timings[name] = time.perf_counter() - t
+        return out
+
+    gsa = timed("gsa", lambda: sensitivity_step(setup, ident_ref, int(seeds[0])))
+    search = timed("stiffness_subproblems", lambda: subproblem_step(setup, ident_ref, gsa, int(seeds[1])))
+    refinement = timed("stiffness_refinement", lambda: stiffness_refinement_step(setup, ident_ref, search, caught))
+    current = (search.values if refinement is None else refinement.values).copy()
+    damping = timed("damping_least_squares", lambda: damping_step(setup, gsa, current))
+    if damping is not None:
+        current[[setup.space.names.index(n) for n in damping.names]] = damping.values
+    joint = timed("joint_refinement", lambda: joint_refinement_step(setup, ident_ref, current, caught))
+    validation = timed("validation", lambda: validation_step(setup, joint.values, int(seeds[2])))
+    timings["total"] = time.perf_counter() - t_total
+    data = setup.data
+    return AutomatedResult(
+        method=setup.method, names=setup.space.names, stiffness_unknowns=tuple(setup.modal_unknowns),
+        damping_unknowns=tuple(setup.damping_unknowns),
+        identification_positions=tuple(dict(data.sets[k].position) for k in setup.ident),
+        validation_position=None if setup.held is None else dict(data.sets[setup.held].position),
+        settings=setup.settings, gsa=gsa, stiffness=search, refinement=refinement, damping=damping,
+        after_damping=current, joint=joint, validation=validation, timings=timings, warnings=tuple(caught))
+
+
+# -- step 1 -----------------------------------------------------------------------------------------------------
+
+
+def sensitivity_step(setup: Setup, ident_ref: ModalData, seed: int) -> GSAStage:
+    """One Sobol' design over all unknowns within their bounds; ``ST`` of every criterion of every mode and
+    identification position, and the unknowns significant for it."""
+    from cappe.sensitivity import model_sobol
+
+    space, settings = setup.space, setup.settings
+    bounds = np.column_stack([space.lower, space.upper])
+    sobol = model_sobol(setup.base_model, ident_ref, parameters=list(space.names), bounds=bounds, n=settings.n_gsa,
+                        rng=seed, criteria=settings.criteria, n_workers=setup.n_workers, executor=setup.runner,
+                        progress=setup.progress)
+    st = sobol.sobol.ST
+    outputs: list[SensitivityOutput] = []
+    for j, data_set in enumerate(ident_ref.sets):
+        for r in range(data_set.n_modes):
+            for c in settings.criteria:
+                row = st[len(outputs)]
+                outputs.append(SensitivityOutput(
+                    j, r + 1, dict(data_set.position), c, float(data_set.frequency[r]), row,
+                    tuple(n for n, v in zip(space.names, row, strict=True) if v >= settings.threshold), space.names))
+    return GSAStage(sobol, settings.n_gsa, settings.n_gsa * (space.n + 2) * len(setup.ident), settings.threshold,
+                    tuple(outputs))
+
+
+# -- step 2 -----------------------------------------------------------------------------------------------------
+
+
+def subproblem_step(setup: Setup, ident_ref: ModalData, gsa: GSAStage, seed: int) -> StiffnessSearch:
+    """For every mode-position pair with significant modal unknowns (MACXP), ``n_opt`` batched local searches over
+    them from random points in the bounds; each unknown taken from the subproblem where it spreads least."""
+    space, settings, model = setup.space, setup.settings, setup.model
+    structure = model.structure
+    modal_names = setup.modal_unknowns
+    engine = ModalEngine(setup.base_model, sensors=list(setup.data.sensors))  # known masses at their nominal
+    jobs: list[tuple[int, int, tuple[str, ...]]] = []
+    for j, data_set in enumerate(ident_ref.sets):
+        position = structure.resolve_position(data_set.position)
+        engine.evaluate(space.full(space.start), position)  # warm the per-position caches before threading
+        for r in range(data_set.n_modes):
+            search = tuple(n for n in gsa.output(j, r + 1, "macxp").significant if n in modal_names)
+            if search:
+                jobs.append((j, r, search))
+    job_seeds = np.random.default_rng(seed).integers(1, 2**31, size=max(len(jobs), 1))
+    lo_u, hi_u = space.internal_bounds()
+    w_f, _, w_s = settings.weights
+
+    def run(s: slice) -> list[SubproblemResult]:
+        results = []
+        for q in range(s.start, s.stop):
+            j, r, search = jobs[q]
+            sub_rng = np.random.default_rng(int(job_seeds[q]))
+            u = sub_rng.uniform(lo_u, hi_u, size=(settings.n_opt, space.n))  # random unknowns, starts included
+            starts = space.full(space.from_internal(u))
+            idx = [space.names.index(n) for n in search]
+            t0 = time.perf_counter()
+            values, cost, iters = solve_subproblem(
+                model=model, reference=ident_ref, set_index=j, mode=r, parameters=search, start=starts,
+                lower=space.lower[idx], upper=space.upper[idx], weights=(w_f, w_s),
+                max_iterations=settings.max_iterations, engine=engine)
+            position = structure.resolve_position(ident_ref.sets[j].position)
+            results.append(SubproblemResult(r + 1, dict(position), search, values, cost, iters,
+                                            time.perf_counter() - t0, space.lower[idx], space.upper[idx]))
+        return results
+
+    bar = setup.bar(len(jobs), "stiffness subproblems", "subproblem")
+    try:
+        parts = setup.runner.map(run, chunk_slices(len(jobs), 1), done=lambda s: bar.update(s.stop - s.start))
+    finally:
+        bar.close()
+    subproblems = tuple(sub for part in parts for sub in part)
+    selection = choose_stiffness(subproblems, modal_names)
+    values = space.start.copy()
+    for n, choice in selection.items():
+        i = space.names.index(n)
+        values[i] = np.clip(choice.value, space.lower[i], space.upper[i])
+    return StiffnessSearch(subproblems, selection, tuple(n for n in modal_names if n not in selection), values)
+
+
+# -- step 3 -----------------------------------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class _LocalRefinement:
+    """One modal-updating refinement from a start: the values reached and the fit's record."""
+
+    values: Array
+    estimate: Any  # ParameterEstimate
+    cost_before: float
+    evaluations: int | None
+    relative_change: dict[str, float]
+    cost_function: Any  # CostFunction | None
+
+
+def stiffness_refinement_step(setup: Setup, ident_ref: ModalData, search: StiffnessSearch,
+                              caught: list[str]) -> StiffnessRefinement | None:
+    """The modal unknowns refined jointly over all modes and positions (first-order modes, damping fixed) from the
+    selection and the alternative starts; the lowest final cost wins. None without modal unknowns."""
+    space, settings = setup.space, setup.settings
+    modal_names = setup.modal_unknowns
+    if not modal_names:
+        return None
+    selected = search.values
+    candidates = _alternative_starts(list(search.subproblems), space, selected, modal_names, settings.refine_starts)
+    w_f, _, w_s = settings.weights
+    # independent local refinements: side by side on a thread executor (numpy's solves release the GIL); their
+    # warnings are recorded here, around all of them (catch_warnings is process-wide state)
+    local = setup.runner if setup.runner.kind == "threads" else Executor("serial")
+    bar = setup.bar(len(candidates), "stiffness refinement", "start")
+    with _recorded_warnings(caught, sort=True):  # the starts' threads interleave their warnings
+        try:
+            refined = local.map(lambda c: _modal_refinement(setup, ident_ref, c[1], modal_names, (w_f, 0.0, w_s)),
+                                candidates, done=lambda _: bar.update(1))
+        finally:
+            bar.close()
+    runs = tuple(RefinementRun(label, found.cost_before, float(found.estimate.cost))
+                 for (label, _), found in zip(candidates, refined, strict=True))
+    best = 0
+    for k, run in enumerate(runs):
+        if run.cost_after < runs[best].cost_after * (1 - 1e-9):
+            best = k
+    found, est = refined[best], refined[best].estimate
+    idx = [space.names.index(n) for n in modal_names]
+    return StiffnessRefinement(
+        start=runs[best].start, runs=runs, cost_before=runs[0].cost_before, cost_after=runs[best].cost_after,
+        success=bool(est.success), message=est.message, evaluations=found.evaluations,
+        relative_change={n: float(found.values[i] / selected[i] - 1.0) for n, i in zip(modal_names, idx, strict=True)},
+        selection={n: float(selected[i]) for n, i in zip(modal_names, idx, strict=True)}, values=found.values)
+
+
+def _modal_refinement(setup: Setup, reference: ModalData, current: Array, names: list[str],
+                      weights: tuple[float, float, float]) -> _LocalRefinement:
+    """Modal updating over ``names`` from ``current`` (other unknowns fixed). The caller records the warnings."""
+    model, space = setup.model, setup.space
+    fixed = {n: float(v) for n, v in zip(space.names, current, strict=True) if n not in names}
+    known = {n: float(v) for n, v in zip(model.parameter_names, space.base, strict=True)}
+    known.update(fixed)
+    idx = [space.names.index(n) for n in names]
+    bounds = {n: (float(space.lower[i]), float(space.upper[i])) for n, i in zip(names, idx, strict=True)}
+    start = {n: float(np.clip(current[i], space.lower[i], space.upper[i])) for n, i in zip(names, idx, strict=True)}
+    updater = ModalUpdatingEstimator(model, names, bounds=bounds, start=start, values=known, weights=weights)
+    r0 = updater.residuals(reference)
+    est = updater.fit(reference).estimate_
+    out = current.copy()
+    out[idx] = est.values
+    return _LocalRefinement(
+        values=out, estimate=est, cost_before=float(r0 @ r0), evaluations=est.diagnostics.get("evaluations"),
+        relative_change={n: float(est.values[k] / current[i] - 1.0) for k, (n, i) in
+                         enumerate(zip(names, idx, strict=True))},
+        cost_function=updater.cost_function_)
+
+
+# -- step 4 -----------------------------------------------------------------------------------------------------
+
+
+def damping_step(setup: Setup, gsa: GSAStage, current: Array) -> DampingLeastSquares | None:
+    """The damping unknowns by bounded linear least squares at the identified stiffness, rows chosen by their
+    GSA interaction (sum of the other unknowns' ``ST`` of NDD^2). None without damping unknowns."""
+    space, settings, data = setup.space, setup.settings, setup.data
+    damp_names = setup.damping_unknowns
+    if not damp_names:
+        return None
+    interaction: dict[tuple[int, int], float] | None = None
+    if "ndd2" in settings.criteria:
+        others = np.array([n not in damp_names for n in space.names])
+        interaction = {(k, r): float(np.sum(np.clip(gsa.output(j, r + 1, "ndd2").st[others], 0, None)))
+                       for j, k in enumerate(setup.ident) for r in range(data.sets[k].n_modes)}
+    didx = [space.names.index(n) for n in damp_names]
+    return damping_least_squares(
+        model=setup.model, reference=data, params=space.full(current), damping=damp_names,
+        lower=space.lower[didx], upper=space.upper[didx], sets=list(setup.ident), interaction=interaction,
+        n_rows=settings.damping_rows, residual_threshold=settings.residual_damping_threshold)
+
+
+# -- step 5 -----------------------------------------------------------------------------------------------------
+
+
+def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, caught: list[str]) -> JointRefinement:
+    """All unknowns refined jointly over all modes and positions from ``current``, on exact complex modes
+    (:class:`ExactModalProblem`) or, with ``exact=False``, first-order ones (modal updating)."""
+    settings, space = setup.settings, setup.space
+    if not settings.exact:
+        with _recorded_warnings(caught):
+            found = _modal_refinement(setup, ident_ref, current, list(space.names), settings.weights)
+        est = found.estimate
+        return JointRefinement(est, found.cost_function, found.cost_before, float(est.cost), bool(est.success),
+                               est.message, found.evaluations, found.relative_change, None, found.values)
+    problem = ExactModalProblem(setup.model, space, ident_ref, settings.weights, settings.noise,
+                                executor=setup.runner)
+    r0 = problem.residuals(current)
+    diagnostics = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)"}
+    start = np.clip(current, space.lower, space.upper)
+    fitted = least_squares_fit(setup.method, space, problem.residuals, problem.jacobian, starts=start[None, :],
+                               diagnostics=diagnostics)
+    est = fitted.estimate
+    values = np.asarray(est.values, dtype=float)
+    return JointRefinement(
+        est, fitted.cost, float(r0 @ r0), float(est.cost), bool(est.success), est.message, problem.evaluations,
+        {n: float(v / c - 1.0) for n, v, c in zip(space.names, est.values, current, strict=True)},
+        problem.pairing_report(values), values)
+
+
+# -- step 6 -----------------------------------------------------------------------------------------------------
+
+
+def validation_step(setup: Setup, final: Array, seed: int) -> IdentificationValidation:
+    """The identified model at the held-out and the identification positions (FRAC, CSF, MACXP, NDD), and the
+    permuted-damping models: the identified damping factors (over their start values) reassigned at random."""
+    model, space, data, settings = setup.model, setup.space, setup.data, setup.settings
+    truth = None if settings.truth is None else model.vector(model.structure.resolve_parameters(
+        {**{n: float(v) for n, v in zip(model.parameter_names, space.base, strict=True)}, **dict(settings.truth)}))
+    held, ident = setup.held, list(setup.ident)
+    damp_names = setup.damping_unknowns
+    n_perm = settings.n_permutations if len(damp_names) > 1 else 0
+
+    def check(job: tuple[Array, int]) -> ValidationResult:
+        params, k = job
+        return validate_identification(model=model, params=params, reference=data, position=data.sets[k].position,
+                                       truth=truth, overlay=settings.overlay)
+
+    models: list[tuple[Array, int]] = [(space.full(final), k) for k in ([] if held is None else [held]) + ident]
+    assignments = []
+    if n_perm:
+        perm_rng = np.random.default_rng(seed)
+        didx = [space.names.index(n) for n in damp_names]
+        factors = final[didx] / space.start[didx]
+        target = held if held is not None else ident[0]
+        for _ in range(n_perm):
+            order = _derangement(len(didx), perm_rng)
+            p_perm = final.copy()
+            p_perm[didx] = space.start[didx] * factors[order]
+            models.append((space.full(p_perm), target))
+            assignments.append({damp_names[i]: damp_names[o] for i, o in enumerate(order)})
+    bar = setup.bar(len(data.sets) + n_perm, "validation", "model")
+    # independent FRF validations: on the executor (numpy's solves release the GIL)
+    try:
+        checked = setup.runner.map(check, models, done=lambda _: bar.update(1))
+    finally:
+        _truth_receptance.cache_clear()  # the reference FRFs (tens of MB per position) are not kept
+        bar.close()
+    held_result = None if held is None else checked.pop(0)
+    return IdentificationValidation(held_result, tuple(checked[: len(ident)]), tuple(checked[len(ident):]),
+                                    tuple(assignments))
+
+
+# -- helpers ----------------------------------------------------------------------------------------------------
+
+
+@contextlib.contextmanager
+def _recorded_warnings(caught: list[str], *, sort: bool = False) -> Iterator[None]:
+    """Append the warnings raised inside the block to ``caught`` as ``"Category: message"``, from any thread
+    (``catch_warnings`` is process-wide state, so it wraps a whole parallel map, not each task); ``sort`` where
+    threads interleave them, so that the diagnostics do not depend on the scheduling."""
+    with warnings.catch_warnings(record=True) as record:
+        warnings.simplefilter("always")
+        yield
+    lines = [f"{w.category.__name__}: {w.message}" for w in record]
+    caught.extend(sorted(lines) if sort else lines)
+
+
+def _derangement(n: int, rng: np.random.Generator) -> NDArray[np.intp]:
+    """A random permutation with no fixed point (n >= 2)."""
+    while True:
+        order = rng.permutation(n)
+        if not np.any(order == np.arange(n)):
+            return order.astype(np.intp)
+
