@@ -155,3 +155,17 @@ def test_errors_found_in_the_data_name_the_data_file(tmp_path, capsys):
     assert code == 1
     assert "channel names must not be empty; channel 0 has none" in err
     assert str(path) in err
+
+
+def test_reference_not_matching_the_model_names_the_reference(tmp_path, capsys):
+    # found by the fuzz test: a sensor the model lacks was a ModelError without the reference file's name
+    ref = tmp_path / "ref.json"
+    assert main(["model", "modes", "builtin:two-mass-rig", "--modal-out", str(ref)]) == 0
+    data = json.loads(ref.read_text())
+    data["sensors"][0] = "n7:x"
+    ref.write_text(json.dumps(data))
+    capsys.readouterr()
+    code = main(["sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "4"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert err.startswith(f"cappe: error: {ref}: sensor 'n7:x' does not exist in model 'two-mass-rig'")

@@ -144,11 +144,15 @@ def _default(obj: Any) -> Any:
     return str(obj)
 
 
-def naming_file(attribute: str) -> Callable[[Callable[_P, int]], Callable[_P, int]]:
-    """Make a command's DataError name the data file ``args.<attribute>`` where the message does not already.
+def naming_file(
+    attribute: str, errors: tuple[type[Exception], ...] = (DataError,)
+) -> Callable[[Callable[_P, int]], Callable[_P, int]]:
+    """Make a command's ``errors`` name the data file ``args.<attribute>`` where the message does not already.
 
     The readers name the file in every error of their own; what the library finds later in the data (a channel
     that is missing, a record too short for the segment length) does not know which file the data came from.
+    ModelError belongs in ``errors`` only where the model was loaded before (then it is about this file's data
+    against the model, e.g. a reference's sensor the model lacks).
     """
 
     def decorate(func: Callable[_P, int]) -> Callable[_P, int]:
@@ -156,13 +160,13 @@ def naming_file(attribute: str) -> Callable[[Callable[_P, int]], Callable[_P, in
         def run(*pos: _P.args, **kw: _P.kwargs) -> int:
             try:
                 return func(*pos, **kw)
-            except DataError as exc:
+            except errors as exc:
                 args = next((a for a in pos if isinstance(a, argparse.Namespace)), None)
                 path = getattr(args, attribute, None)
                 if not isinstance(path, str) or Path(path).name in str(exc):
                     raise
                 msg = f"{path}: {exc}"
-                raise DataError(msg) from exc
+                raise type(exc)(msg) from exc
 
         return run
 

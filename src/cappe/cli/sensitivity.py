@@ -7,6 +7,7 @@ import argparse
 import numpy as np
 
 from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, naming_file
+from cappe.exceptions import DataError, ModelError
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -58,7 +59,7 @@ def _local(ctx: ModelContext, args: argparse.Namespace) -> int:
     return 0
 
 
-@naming_file("reference")
+@naming_file("reference", (DataError, ModelError))
 def _sobol(ctx: ModelContext, args: argparse.Namespace) -> int:
     from cappe.io import read_modal_data
     from cappe.sensitivity import model_sobol
