@@ -7,6 +7,9 @@ from typing import Any
 
 import numpy as np
 
+from cappe._plotting import figure as _figure
+from cappe._plotting import save as _save
+from cappe.sensitivity import landscape_plot, sobol_plot
 from cappe.systems.frf import FRFData
 from cappe.systems.zpk import ZeroPoleGainModel
 
@@ -23,27 +26,6 @@ __all__ = [
     "stabilization_plot",
     "trajectory_plot",
 ]
-
-
-def _figure(rows: int) -> tuple[Any, Any]:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    return plt.subplots(rows, 1, figsize=(7, 3 + 2 * rows), sharex=rows > 1)
-
-
-def _save(fig: Any, path: str | Path) -> Path:
-    import matplotlib.pyplot as plt
-
-    out = Path(path)
-    tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
-    fig.tight_layout()
-    fig.savefig(tmp, dpi=120)
-    plt.close(fig)
-    tmp.replace(out)
-    return out
 
 
 def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
@@ -252,55 +234,6 @@ def response_plot(
     axes[-1].set_xlabel(xlabel)
     if title:
         axes[0].set_title(title)
-    return _save(fig, path)
-
-
-def landscape_plot(landscape: Any, path: str | Path, title: str = "", *, log: bool = True, levels: int = 30) -> Path:
-    """Filled contours of a two-parameter cost landscape (:class:`cappe.sensitivity.CostLandscape`)."""
-    fig, ax = _figure(1)
-    values = np.asarray(landscape.values, dtype=float)
-    shown = np.log10(np.maximum(values, np.finfo(float).tiny)) if log else values
-    filled = ax.contourf(landscape.x, landscape.y, shown, levels=levels, cmap="viridis")
-    fig.colorbar(filled, ax=ax, label="log10 cost" if log else "cost")
-    x_min, y_min, _ = landscape.minimum
-    ax.plot([x_min], [y_min], "r+", markersize=12, label="grid minimum")
-    ax.set_xlabel(landscape.names[0])
-    ax.set_ylabel(landscape.names[1])
-    ax.legend(loc="best", fontsize=8)
-    ax.set_title(title or f"cost over {landscape.names[0]} and {landscape.names[1]}")
-    return _save(fig, path)
-
-
-def sobol_plot(result: Any, path: str | Path, *, outputs: Any = None, top: int = 10, max_panels: int = 6) -> Path:
-    """Bars of S1 and ST with confidence whiskers, the ``top`` parameters by ST for each output (paper Fig. 5).
-
-    ``result`` is a :class:`cappe.sensitivity.SobolResult`; ``outputs`` selects output names (default: the
-    first ``max_panels``).
-    """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    names = list(result.output_names)
-    chosen = list(outputs) if outputs is not None else names[:max_panels]
-    unknown = [o for o in chosen if o not in names]
-    if unknown:
-        msg = f"unknown outputs {unknown}; known: {', '.join(names[:10])}{' ...' if len(names) > 10 else ''}"
-        raise ValueError(msg)
-    fig, axes = plt.subplots(len(chosen), 1, figsize=(7, 2.6 * len(chosen)), squeeze=False)
-    width = 0.4
-    for ax, output in zip(axes[:, 0], chosen, strict=True):
-        o = names.index(output)
-        order = np.argsort(-np.nan_to_num(result.ST[o], nan=-np.inf), kind="stable")[:top]
-        x = np.arange(order.size)
-        ax.bar(x - width / 2, result.S1[o, order], width, yerr=result.S1_conf[o, order], capsize=3, label="S1")
-        ax.bar(x + width / 2, result.ST[o, order], width, yerr=result.ST_conf[o, order], capsize=3, label="ST")
-        ax.set_xticks(x, [result.names[j] for j in order], rotation=30, ha="right", fontsize=8)
-        ax.set_ylabel("index")
-        ax.set_title(output, fontsize=9)
-        ax.grid(True, axis="y", alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize=8)
     return _save(fig, path)
 
 

@@ -1,5 +1,5 @@
 """Sensitivity analysis: local (analytic) sensitivities, percentage tables, cost landscapes, Sobol' indices and
-Morris screening of vectorized models, and the model GSA per mode, position and criterion."""
+Morris screening of vectorized models, the model GSA per mode, position and criterion, and their plots."""
 
 from cappe.sensitivity._gsa import CRITERIA, ModelSobolResult, model_sobol
 from cappe.sensitivity._local import (
@@ -11,6 +11,7 @@ from cappe.sensitivity._local import (
     percentage_table,
 )
 from cappe.sensitivity._morris import MorrisResult, morris_screening
+from cappe.sensitivity._plots import landscape_plot, sobol_plot
 from cappe.sensitivity._sobol import SobolResult, sobol_analyze, sobol_indices
 
 __all__ = [
@@ -22,10 +23,12 @@ __all__ = [
     "PercentageTable",
     "SobolResult",
     "cost_landscape",
+    "landscape_plot",
     "modal_sensitivity",
     "model_sobol",
     "morris_screening",
     "percentage_table",
     "sobol_analyze",
     "sobol_indices",
+    "sobol_plot",
 ]

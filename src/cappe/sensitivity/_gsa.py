@@ -26,6 +26,7 @@ from cappe.modal import ModalBatch, ModalEngine
 from cappe.model.numeric import NumericModel
 from cappe.model.structure import Structure
 from cappe.parallel import Executor
+from cappe.sensitivity._plots import sobol_plot
 from cappe.sensitivity._sobol import SobolResult, sobol_indices
 from cappe.systems.modal import ModalData, ModalDataSet
 
@@ -97,8 +98,6 @@ class ModelSobolResult:
 
     def plot(self, path: str | Path, *, outputs: Sequence[str] | None = None, top: int = 10) -> Path:
         """S1 and ST bars with confidence whiskers, ``top`` parameters per output (paper Fig. 5)."""
-        from cappe.report.plots import sobol_plot
-
         return sobol_plot(self.sobol, path, outputs=outputs, top=top)
 
 

@@ -16,6 +16,7 @@ from cappe.exceptions import DataError, ModelError
 from cappe.modal import ModalDerivatives, ModalEngine
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
+from cappe.sensitivity._plots import landscape_plot
 from cappe.systems.modal import ModalData
 
 __all__ = [
@@ -297,8 +298,6 @@ class CostLandscape:
 
     def plot(self, path: str | Path, *, title: str = "", log: bool = True, levels: int = 30) -> Path:
         """Write a filled contour plot of the landscape (log10 of the cost by default) to ``path``."""
-        from cappe.report.plots import landscape_plot
-
         return landscape_plot(self, path, title, log=log, levels=levels)
 
 
