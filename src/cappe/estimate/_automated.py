@@ -49,7 +49,6 @@ The pipeline (paper Fig. 1), for reference modes at several axis positions, one 
 
 from __future__ import annotations
 
-import copy
 from collections.abc import Mapping, Sequence
 from typing import Any, ClassVar
 
@@ -289,10 +288,7 @@ class AutomatedIdentification(Estimator):
         runner = Executor.coerce(self.executor, self.n_workers)
         # the known parameters' values: the GSA evaluates the model at its nominal vector, so hand it (and the
         # subproblems' engine, whose shared-mass reduction is that of the nominal M) a view whose nominal holds them
-        base_model = model
-        if not np.array_equal(space.base, model.nominal):
-            base_model = copy.copy(model)
-            base_model.nominal = space.base.copy()
+        base_model = model if np.array_equal(space.base, model.nominal) else model.with_nominal(space.base)
         setup = Setup(self.method, model, base_model, space, data, tuple(ident), held, settings, runner,
                       self.n_workers, self.progress)
         try:

@@ -391,4 +391,3 @@ def _derangement(n: int, rng: np.random.Generator) -> NDArray[np.intp]:
         order = rng.permutation(n)
         if not np.any(order == np.arange(n)):
             return order.astype(np.intp)
-
