@@ -63,9 +63,9 @@ from cappe.estimate._space import ParameterSpace
 from cappe.estimate._subproblems import SubproblemResult
 from cappe.estimate._validation import find_set
 from cappe.exceptions import DataError, ModelError, NotFittedError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.model import NumericModel, Structure
 from cappe.parallel import Executor, single_threaded_blas
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["DAMPING_KINDS", "AutomatedIdentification"]
 

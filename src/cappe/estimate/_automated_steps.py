@@ -35,10 +35,10 @@ from cappe.estimate._modal_updating import ModalUpdatingEstimator
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._subproblems import SubproblemResult, _alternative_starts, choose_stiffness, solve_subproblem
 from cappe.estimate._validation import ValidationResult, _truth_receptance, validate_identification
-from cappe.io.modal import ModalData
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel
 from cappe.parallel import Executor, chunk_slices
+from cappe.systems.modal import ModalData
 
 __all__ = ["Setup", "run_pipeline"]
 

@@ -38,9 +38,9 @@ from cappe.estimate._base import Estimator, Fitted, least_squares_fit
 from cappe.estimate._one_step import random_starts
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
-from cappe.io.modal import ModalData, ModalDataSet
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
+from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ModalUpdatingEstimator"]
 
