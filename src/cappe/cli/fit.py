@@ -72,6 +72,11 @@ def _pairs(values: Any) -> list[list[float]]:
     return [[float(z.real), float(z.imag)] for z in v]
 
 
+def _orders(model: Any) -> dict[str, Any]:
+    """The polynomial orders and delays of a fitted model (its settings without the iteration limits)."""
+    return {k: v for k, v in model.get_params().items() if k not in ("max_iter", "tol")}
+
+
 def _fit_quality(model: Any, data: Any) -> dict[str, Any]:
     """NRMSE fit in % of the simulated output, or of the one-step prediction when the model is unstable."""
     stable = bool(np.all(np.abs(model.poles()) < 1.0))
@@ -101,7 +106,7 @@ def run(args: argparse.Namespace) -> int:
             result["order_selection"] = selection.to_dict()
         else:
             model = _estimator(args.structure, n, args.nk).fit(data, inputs=args.input, output=args.output)
-        result["orders"] = model.get_params()
+        result["orders"] = _orders(model)
         result["success"] = bool(model.success_)
         result.update(_fit_quality(model, data))
         result["loss"] = float(model.loss_)
@@ -126,7 +131,7 @@ def run(args: argparse.Namespace) -> int:
             if args.refine:
                 order = 2 * modes.n_modes + int(np.sum(np.abs(poles.imag) == 0))
                 refined = OE(order, order, args.nk).fit(data, inputs=args.input, output=args.output)
-                result["refined"] = {"orders": refined.get_params(), "success": bool(refined.success_),
+                result["refined"] = {"orders": _orders(refined), "success": bool(refined.success_),
                                      **_fit_quality(refined, data)}
                 model, modes, poles = refined, refined.modal_parameters(), refined.continuous_poles()
                 tfs = [refined.to_transfer_function(name, negative_real="reflect") for name in args.input]

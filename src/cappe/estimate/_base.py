@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from scipy.optimize import least_squares
 
 from cappe._rng import RandomLike, as_generator
+from cappe._settings import Settings
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import jacobian_uncertainty
@@ -61,7 +62,7 @@ class Fitted:
         return replace(self, estimate=estimate)
 
 
-class Estimator(ABC):
+class Estimator(Settings, ABC):
     """Base class: ``Estimator(model, unknowns, bounds=..., start=..., values=..., rng=...).fit(data)``.
 
     Parameters
@@ -78,6 +79,12 @@ class Estimator(ABC):
         Values of the known parameters, when they differ from the model file.
     rng : int, Generator or None
         Seed for every random choice (multi-start points, bootstrap, filters).
+
+    Notes
+    -----
+    ``get_params()`` returns every ``__init__`` argument by name and ``set_params(**settings)`` changes them for the
+    next fit, so ``type(est)(**est.get_params())`` is an unfitted copy. A subclass's ``__init__`` stores its arguments
+    unchanged under their own names and nothing else; it validates them in ``fit``.
     """
 
     #: Name written to ``cappe.estimate/1`` files.
@@ -184,9 +191,6 @@ class Estimator(ABC):
                 r = np.asarray(residuals(p), dtype=float)
                 values[i, j] = float(r @ r)
         return CostLandscape((names[0], names[1]), axes[0], axes[1], values, space.full(centre))
-
-    def get_params(self) -> dict[str, Any]:
-        return {k: v for k, v in vars(self).items() if not k.endswith("_") and not k.startswith("_")}
 
 
 def fit_least_squares(

@@ -19,6 +19,7 @@ Steiglitz-McBride iterations (OE, BJ). Filters start from zero initial condition
 
 from __future__ import annotations
 
+import inspect
 import math
 import warnings
 from abc import ABC, abstractmethod
@@ -31,6 +32,7 @@ import scipy.linalg as sla
 import scipy.signal as sig
 from numpy.typing import NDArray
 
+from cappe._settings import Settings
 from cappe.exceptions import ConvergenceWarning, DataError, IllConditionedWarning, ModelError, NotFittedError
 from cappe.io.measurements import match_channels
 from cappe.systems.statespace import StateSpaceModel
@@ -596,6 +598,12 @@ def _input_names(inputs: Sequence[str] | str) -> tuple[str, ...]:
     return names
 
 
+def _check_time_data(data: Any, owner: str) -> None:
+    if not isinstance(data, TimeData):
+        msg = f"{owner} needs TimeData with the input and output channels; got {type(data).__name__}"
+        raise DataError(msg)
+
+
 def _channel(data: TimeData, name: str, role: str) -> Array:
     return np.asarray(data.values[match_channels(data, [name], role)[0]])
 
@@ -604,7 +612,7 @@ def _channel(data: TimeData, name: str, role: str) -> Array:
 # the estimators
 
 
-class PolynomialModel(ABC):
+class PolynomialModel(Settings, ABC):
     """Common base of the polynomial black-box estimators (scikit-learn conventions).
 
     Learned attributes (after :meth:`fit`): ``A_``, ``B_`` (one array per input), ``C_``, ``D_``, ``F_`` (one
@@ -612,6 +620,8 @@ class PolynomialModel(ABC):
     ``parameter_names_``; ``covariance_`` and ``parameter_std_`` (from the Jacobian, ``lambda (J^T J)^-1``);
     ``loss_`` (V, the mean squared one-step prediction error over the samples used); ``noise_variance_``
     (``sum e^2 / (N - d)``); ``n_parameters_`` (d); ``n_samples_`` (N); ``success_``; ``message_``; ``n_iter_``.
+    ``get_params()`` returns every ``__init__`` argument (orders and iteration settings), ``set_params(**settings)``
+    changes them for the next fit.
 
     Examples
     --------
@@ -634,12 +644,12 @@ class PolynomialModel(ABC):
         whole fit, ARMAX and BJ add their noise models)."""
         return _output_error_start(y, u, o)
 
-    @abstractmethod
-    def get_params(self) -> dict[str, Any]:
-        """The settings given to ``__init__``."""
-
     def __repr__(self) -> str:
-        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items())
+        # the orders always; the keyword-only iteration settings where they differ from their defaults
+        defaults = {p.name: p.default for p in inspect.signature(type(self).__init__).parameters.values()
+                    if p.kind is inspect.Parameter.KEYWORD_ONLY}
+        args = ", ".join(f"{k}={v!r}" for k, v in self.get_params().items()
+                         if k not in defaults or repr(v) != repr(defaults[k]))
         return f"{type(self).__name__}({args})"
 
     # -- fitting --------------------------------------------------------------------------------------------------
@@ -664,8 +674,10 @@ class PolynomialModel(ABC):
         Raises
         ------
         DataError
-            A channel is missing, the orders are invalid or the record is too short for them.
+            ``data`` is not TimeData, a channel is missing, the orders or iteration settings are invalid or the record
+            is too short for them.
         """
+        _check_time_data(data, f"{type(self).__name__}.fit")
         names = _input_names(inputs)
         if not isinstance(output, str):
             msg = f"output must be one channel name; got {output!r}"
@@ -742,6 +754,7 @@ class PolynomialModel(ABC):
 
     def _input_arrays(self, data: TimeData) -> Array:
         self._check_fitted()
+        _check_time_data(data, type(self).__name__)
         if abs(data.dt - self.dt_) > 1e-6 * self.dt_:
             msg = f"data sampled at dt = {data.dt:.9g} s but the model was fitted at dt = {self.dt_:.9g} s"
             raise DataError(msg)
@@ -1027,9 +1040,6 @@ class ARX(PolynomialModel):
         self.nb = nb
         self.nk = nk
 
-    def get_params(self) -> dict[str, Any]:
-        return {"na": self.na, "nb": self.nb, "nk": self.nk}
-
     def _orders(self, n_inputs: int) -> _Orders:
         na = _as_int(self.na, "na", 0, "ARX")
         nb = _per_input(self.nb, "nb", 1, n_inputs, "ARX")
@@ -1097,9 +1107,6 @@ class ARMAX(PolynomialModel):
         self.max_iter = max_iter
         self.tol = tol
 
-    def get_params(self) -> dict[str, Any]:
-        return {"na": self.na, "nb": self.nb, "nc": self.nc, "nk": self.nk}
-
     def _orders(self, n_inputs: int) -> _Orders:
         na = _as_int(self.na, "na", 0, "ARMAX")
         nb = _per_input(self.nb, "nb", 1, n_inputs, "ARMAX")
@@ -1159,9 +1166,6 @@ class OE(PolynomialModel):
         self.max_iter = max_iter
         self.tol = tol
 
-    def get_params(self) -> dict[str, Any]:
-        return {"nb": self.nb, "nf": self.nf, "nk": self.nk}
-
     def _orders(self, n_inputs: int) -> _Orders:
         nb = _per_input(self.nb, "nb", 1, n_inputs, "OE")
         nf = _per_input(self.nf, "nf", 0, n_inputs, "OE")
@@ -1219,9 +1223,6 @@ class BoxJenkins(PolynomialModel):
         self.nk = nk
         self.max_iter = max_iter
         self.tol = tol
-
-    def get_params(self) -> dict[str, Any]:
-        return {"nb": self.nb, "nc": self.nc, "nd": self.nd, "nf": self.nf, "nk": self.nk}
 
     def _orders(self, n_inputs: int) -> _Orders:
         nb = _per_input(self.nb, "nb", 1, n_inputs, "BoxJenkins")
