@@ -351,6 +351,25 @@ def test_validation_leaves_undamped_reference_modes_out_of_ndd(two_mass):
     assert res.statistics()["ndd"]["worst"] == res.ndd[1]
 
 
+def test_validation_of_channels_the_model_cannot_move_is_undefined_without_warning(two_mass):
+    # the rig moves along x only; a measured reference holds noise on y and z, where every model FRF is zero. FRAC
+    # is then 0/0: NaN (as correlate.frac refuses it), left out of the statistics, and no RuntimeWarning (it was one,
+    # an error under the test settings, when the automated identification validated on the rig)
+    ref = ModalEngine(two_mass).modal_data()
+    s = ref.sets[0]
+    moved = np.array([label.endswith(":x") for label in ref.sensors])
+    shapes = s.shapes + np.where(moved, 0.0, 1e-3)[:, None]
+    noisy = ModalData(ref.sensors, (ModalDataSet(s.position, s.frequency, s.damping, shapes),))
+    res = validate_identification(model=two_mass, params={}, reference=noisy, n_freq=20)
+    assert res.frf_source == "modal synthesis"
+    frac = res.frac  # (out, in) over the reference channels
+    assert np.all(np.isnan(frac[~moved][:, ~moved]))
+    assert np.all(np.isnan(frac[moved][:, ~moved]))
+    assert np.all(np.isnan(frac[~moved][:, moved]))
+    np.testing.assert_allclose(frac[np.ix_(moved, moved)], 1.0, rtol=0, atol=1e-9)  # the same modes on x
+    assert res.statistics()["frac"]["worst"] == pytest.approx(1.0, abs=1e-9)
+
+
 def test_receptance_matches_the_mechanical_system_frf(bench):
     # the model's input F and output d sit at the sensor point tool, direction x
     freq = np.linspace(5.0, 900.0, 50)

@@ -59,6 +59,7 @@ from cappe.estimate._automated_result import AutomatedResult, AutomatedSettings
 from cappe.estimate._automated_steps import DAMPING_KINDS, Setup, run_pipeline
 from cappe.estimate._base import Estimator, Fitted
 from cappe.estimate._damping_least_squares import DampingLeastSquares
+from cappe.estimate._modal_updating import check_finite_modes
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._subproblems import SubproblemResult
 from cappe.estimate._validation import find_set
@@ -357,6 +358,7 @@ def _check_set(model: NumericModel, where: str, data_set: ModalDataSet) -> None:
     if data_set.n_modes > model.n_dof:
         msg = f"{where} has {data_set.n_modes} modes; model '{name}' has only {model.n_dof}"
         raise DataError(msg)
+    check_finite_modes(where, data_set)
     if np.any(data_set.frequency <= 0):
         bad_modes = (np.flatnonzero(data_set.frequency <= 0) + 1).tolist()
         msg = f"{where}: modes {bad_modes} have frequencies <= 0 Hz"

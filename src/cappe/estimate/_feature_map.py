@@ -39,6 +39,7 @@ from scipy.stats import qmc
 
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, Fitted, least_squares_fit
+from cappe.estimate._modal_updating import check_finite_modes
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.modal import ModalEngine
@@ -189,6 +190,8 @@ class FeatureMapEstimator(Estimator):
         if not modal.sets:
             msg = "modal data hold no sets"
             raise DataError(msg)
+        for k, data_set in enumerate(modal.sets):
+            check_finite_modes(f"modal data set {k} (position {data_set.position})", data_set, shapes=False)
         features = list(self.features) if self.features is not None else None
         if features is not None:
             bad = [f for f in features if f not in _FEATURES]

@@ -69,6 +69,22 @@ class _ModalProblem:
     pairings: Callable[[Array], list[_Pairing]]
 
 
+def check_finite_modes(where: str, data_set: ModalDataSet, *, shapes: bool = True) -> None:
+    """Reference modes built in memory are not checked on construction (files are, by :mod:`cappe.io`): refuse a
+    NaN or infinite frequency, damping ratio or (with ``shapes``) shape entry before it reaches a search, naming the
+    set and the modes (1-based)."""
+    checked: list[tuple[str, NDArray[Any]]] = [("frequencies", data_set.frequency),
+                                               ("damping ratios", data_set.damping)]
+    if shapes:
+        checked.append(("shapes", data_set.shapes))
+    for what, values in checked:
+        values = np.asarray(values)
+        bad = ~np.isfinite(values) if values.ndim == 1 else ~np.all(np.isfinite(values), axis=0)
+        if np.any(bad):
+            msg = f"{where}: modes {(np.flatnonzero(bad) + 1).tolist()} have non-finite {what} (NaN or inf)"
+            raise DataError(msg)
+
+
 def _poles(freq: Array, zeta: Array) -> CArray:
     w = 2 * np.pi * freq
     return np.asarray(-zeta * w + 1j * w * np.sqrt(np.clip(1 - zeta**2, 0, None)), dtype=complex)
@@ -165,6 +181,7 @@ class ModalUpdatingEstimator(Estimator):
             if data_set.n_modes > n_model:
                 msg = f"{where} has {data_set.n_modes} modes; the model offers only {n_model}"
                 raise DataError(msg)
+            check_finite_modes(where, data_set)
             if np.any(data_set.frequency <= 0):
                 msg = f"{where}: reference frequencies must be > 0 Hz; got {data_set.frequency.tolist()}"
                 raise DataError(msg)

@@ -249,8 +249,9 @@ def _truth_receptance(model: NumericModel, truth: bytes, position: tuple[tuple[s
 
 def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
     """FRAC and line-averaged CSF of every FRF ``[..., out, in]`` of line-major arrays ``(n_freq, ...)`` (NaN where
-    the reference is negligible): the formulas of :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf`
-    (one output per FRF), accumulated over blocks of lines.
+    the reference is negligible; FRAC NaN where the model's FRF is zero at every line): the formulas of
+    :func:`cappe.correlate.frac` and :func:`cappe.correlate.csf` (one output per FRF), accumulated over blocks of
+    lines.
 
     Per FRF it sums ``|H_a|^2``, ``|H_x|^2``, ``conj(H_x) H_a`` and the line's CSF
     ``2 |H_a| |H_x| / (|H_a|^2 + |H_x|^2)`` (1 where both are zero) over the lines; a block of lines is small
@@ -278,7 +279,10 @@ def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
     keep = power_x > NEGLIGIBLE_POWER * power_x.max()
     frac_v = np.full(shape, np.nan)
     csf_v = np.full(shape, np.nan)
-    frac_v[keep] = np.abs(cross[keep]) ** 2 / (power_a[keep] * power_x[keep])
+    # a model FRF that is zero at every line (a channel the model cannot move, e.g. y of an x-only model, where the
+    # reference holds noise) leaves FRAC undefined, as in correlate.frac: NaN, without a 0/0 RuntimeWarning
+    power = power_a[keep] * power_x[keep]
+    frac_v[keep] = np.divide(np.abs(cross[keep]) ** 2, power, out=np.full(power.shape, np.nan), where=power > 0)
     csf_v[keep] = csf_sum[keep] / h_ref.shape[0]
     return frac_v, csf_v
 
