@@ -21,8 +21,7 @@ from cappe.correlate import macxp_batch
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import ModelError
 from cappe.io.modal import ModalData, ModalDataSet
-from cappe.modal import ModalEngine
-from cappe.modal._derivatives import REPEATED_TOLERANCE
+from cappe.modal import ModalEngine, mode_derivative_terms
 from cappe.model import NumericModel
 
 __all__ = ["StiffnessChoice", "SubproblemResult", "select_stiffness", "solve_subproblem"]
@@ -185,18 +184,10 @@ def _mode_problem(
         e = a * (c / aa)[:, None] - x[None, :]
         res = np.concatenate([(sw_f * (f - f_ref) / f_ref)[:, None], sw_s * e.real, sw_s * e.imag], axis=1)
         # modal expansion of the derivatives, all searched parameters at once (axis 1 of the (B, n_search, .) arrays)
-        m = phi.shape[2]
-        own = np.arange(m)[None, :] == k[:, None]
-        denom = lam[:, None] - lam_all
-        scale = np.maximum(lam_all.max(axis=1, keepdims=True), 1e-300)
-        skip = own | (np.abs(denom) <= REPEATED_TOLERANCE * scale)
-        safe = np.where(skip, 1.0, denom)
         omega = np.sqrt(lam)
         g, dm_phi = derivative_products(p, phi_k, lam)
         proj = g @ phi  # (B, n_search, m): phi_s^T (dK_i - lam dM_i) phi_k
-        d_lam = proj[rows, :, k]  # (B, n_search)
-        coef = np.where(skip[:, None, :], 0.0, proj / safe[:, None, :])
-        coef[rows, :, k] = -0.5 * (dm_phi @ phi_k[:, :, None])[:, :, 0]
+        d_lam, coef = mode_derivative_terms(lam_all, k, proj, (dm_phi @ phi_k[:, :, None])[:, :, 0])
         da = coef @ np.swapaxes(a_all, 1, 2)  # (B, n_search, n_s)
         d_f = d_lam / (2 * omega[:, None]) / (2 * np.pi)
         dc = da @ x  # (B, n_search)
