@@ -28,10 +28,11 @@ from cappe.estimate._automated_result import (
     StiffnessRefinement,
     StiffnessSearch,
 )
-from cappe.estimate._base import least_squares_fit
+from cappe.estimate._base import CostFunction, least_squares_fit
 from cappe.estimate._damping_least_squares import DampingLeastSquares, damping_least_squares
 from cappe.estimate._exact_modal import ExactModalProblem
 from cappe.estimate._modal_updating import ModalUpdatingEstimator
+from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._subproblems import SubproblemResult, _alternative_starts, choose_stiffness, solve_subproblem
 from cappe.estimate._validation import ValidationResult, _truth_receptance, validate_identification
@@ -212,11 +213,11 @@ class _LocalRefinement:
     """One modal-updating refinement from a start: the values reached and the fit's record."""
 
     values: Array
-    estimate: Any  # ParameterEstimate
+    estimate: ParameterEstimate
     cost_before: float
     evaluations: int | None
     relative_change: dict[str, float]
-    cost_function: Any  # CostFunction | None
+    cost_function: CostFunction | None
 
 
 def stiffness_refinement_step(setup: Setup, ident_ref: ModalData, search: StiffnessSearch,
