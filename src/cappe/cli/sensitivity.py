@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import sys
 
 import numpy as np
 
@@ -69,7 +70,7 @@ def _sobol(ctx: ModelContext, args: argparse.Namespace) -> int:
         raise UsageError(msg)
     reference = read_modal_data(args.reference)
     result = model_sobol(ctx.numeric, reference, parameters=names(args.parameters), n=args.n, rng=args.seed,
-                         criteria=names(args.criteria) or [], progress=not args.json)
+                         criteria=names(args.criteria) or [], progress=not args.json and sys.stderr.isatty())
     if args.plot:
         result.plot(args.plot)
     data = result.to_dict()

@@ -1,0 +1,7 @@
+"""``python -m cappe``: the ``cappe`` command."""
+
+import sys
+
+from cappe.cli import main
+
+sys.exit(main())
