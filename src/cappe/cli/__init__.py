@@ -37,7 +37,19 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Run the CLI; returns the exit code (0 success, 1 failure, 2 usage error)."""
+    """Run the CLI; returns the exit code (0 success, 1 failure, 2 usage error).
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The arguments after ``cappe`` (e.g. ``["model", "modes", "builtin:two-mass-rig"]``); default
+        ``sys.argv[1:]``.
+
+    Returns
+    -------
+    int
+        The exit code.
+    """
     parser = build_parser()
     try:
         args = parser.parse_args(list(argv) if argv is not None else None)

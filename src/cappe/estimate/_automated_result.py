@@ -48,6 +48,37 @@ class AutomatedSettings:
 
     ``to_dict()`` lists those that shape the estimate; ``truth``, ``overlay`` and ``n_permutations`` are the
     validation step's.
+
+    Attributes
+    ----------
+    n_gsa : int
+        Base sample size of the Sobol' design.
+    n_opt : int
+        Local searches per mode-position subproblem.
+    threshold : float
+        Total Sobol' index from which an unknown is significant (dimensionless).
+    criteria : tuple of str
+        GSA outputs per mode and position (``macxp``, ``ndd2``, ``frequency``, ``damping``).
+    weights : (float, float, float)
+        ``(w_f, w_z, w_s)``: weights of the frequency, damping and shape residuals.
+    residual_damping_threshold : float
+        Smallest residual damping ratio of a damping row (dimensionless).
+    damping_rows : int or None
+        Rows of the damping least squares (None: ``max(2 n_d, rows // 3)``).
+    max_iterations : int
+        Iteration limit of the batched subproblem searches.
+    refine_starts : int
+        Starts of the joint stiffness refinement.
+    exact : bool
+        Whether the final joint refinement uses the exact complex modes.
+    noise : tuple of float or None
+        Relative noise of the reference's frequencies, damping ratios and shape components, or None.
+    n_permutations : int
+        Random reassignments of the damping factors in the permuted-damping validation.
+    truth : mapping name -> value or None
+        True parameters (SI) of a simulated reference, for the validation FRFs.
+    overlay : (str, str) or None
+        Output and input channel of the FRF kept for overlays.
     """
 
     n_gsa: int
@@ -143,7 +174,26 @@ class GSAStage:
         return {(o.set_index, o.mode, o.criterion): o for o in self.outputs}
 
     def output(self, set_index: int, mode: int, criterion: str) -> SensitivityOutput:
-        """The output of reference ``mode`` (1-based) at identification set ``set_index`` for ``criterion``."""
+        """The output of reference ``mode`` (1-based) at identification set ``set_index`` for ``criterion``.
+
+        Parameters
+        ----------
+        set_index : int
+            Index of the identification set among the identification sets (0-based).
+        mode : int
+            Reference mode (1-based).
+        criterion : str
+            ``"macxp"``, ``"ndd2"``, ``"frequency"`` or ``"damping"``.
+
+        Returns
+        -------
+        SensitivityOutput
+
+        Raises
+        ------
+        KeyError
+            No such output was computed.
+        """
         return self._by_key[(set_index, mode, criterion)]
 
     def to_dict(self) -> dict[str, Any]:
@@ -180,7 +230,15 @@ class StiffnessSearch:
 
 @dataclass(frozen=True)
 class RefinementRun:
-    """One start of the joint stiffness refinement: its label and the cost before and after."""
+    """One start of the joint stiffness refinement: its label and the cost before and after.
+
+    Attributes
+    ----------
+    start : str
+        Label of the start (``selection``, ``consensus``, ``rank k``).
+    cost_before, cost_after : float
+        Cost (sum of squared residuals, dimensionless) at the start and at the end of the refinement.
+    """
 
     start: str
     cost_before: float

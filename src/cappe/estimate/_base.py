@@ -109,7 +109,25 @@ class Estimator(Settings, ABC):
 
     # -- the pattern ------------------------------------------------------------------------------------------
     def fit(self, data: Any) -> Estimator:
-        """Estimate the unknowns from ``data``; the result is ``self.estimate_``."""
+        """Estimate the unknowns from ``data``; the result is ``self.estimate_``.
+
+        Parameters
+        ----------
+        data : TimeData, FRFData, ModalData or as the method documents
+            The measurements of the kind the method takes (``cappe.estimate.METHODS[method][2]``: time records,
+            FRFs or reference modes), in SI units.
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        DataError
+            The data are not of the method's kind or do not fit the model (channels, positions, NaN ...).
+        ModelError
+            The unknowns, bounds or settings break a rule of the model or the method.
+        """
         numeric = self.model if isinstance(self.model, NumericModel) else NumericModel(self.model)
         space = ParameterSpace.from_model(
             numeric, self.unknowns, bounds=self.bounds, start=self.start, values=self.values
@@ -162,6 +180,27 @@ class Estimator(Settings, ABC):
         about 36 noise variances.
         Returns a :class:`cappe.sensitivity.CostLandscape` (``.plot(path)``). Available for the methods that end in a
         nonlinear least-squares fit (two-step, one-step, modal, feature-map, hybrid of those).
+
+        Parameters
+        ----------
+        names : sequence of two str
+            The unknowns on the x and y axes.
+        n : int
+            Grid points per axis (the cost is evaluated ``n**2`` times).
+        span : float, optional
+            Relative half-width of each axis (0.1: +-10 % of the estimate); default 6 standard errors.
+
+        Returns
+        -------
+        CostLandscape
+            The cost on the ``(n, n)`` grid (rows along ``names[1]``), in the method's residual units squared.
+
+        Raises
+        ------
+        NotFittedError
+            Before ``fit``.
+        ModelError
+            The method has no nonlinear cost, or ``names`` are not two of the unknowns.
         """
         from cappe.sensitivity import CostLandscape
 
@@ -217,6 +256,43 @@ def fit_least_squares(
     ``strategy`` (``"multistart"``, ``"direct"``, ``"differential-evolution"``, ``"dual-annealing"``) first runs
     that global search of :func:`cappe.optimize.minimize` over the whole box (seeded by ``rng``); its result joins
     the starts of the local fit.
+
+    Parameters
+    ----------
+    method : str
+        Method name written to the estimate (``"one-step"``, ``"modal"`` ...).
+    space : ParameterSpace
+        The unknowns, their bounds, start and transformation.
+    residuals : callable
+        ``residuals(p)`` -> ndarray, shape (n_obs,), for an SI parameter vector ``p``, shape (space.n,).
+    jacobian : callable, optional
+        ``jacobian(p)`` -> ndarray, shape (n_obs, space.n): ``d r / d p`` in SI; default 2-point differences.
+    starts : ndarray, shape (n_starts, space.n), optional
+        Start vectors (SI); default the space's start.
+    noise_variance : float, optional
+        Variance of the residuals' noise (residual units squared) for the uncertainty; default estimated from the
+        residuals at the optimum.
+    diagnostics : mapping, optional
+        Extra entries for the estimate's ``diagnostics``.
+    max_nfev : int, optional
+        Limit of residual evaluations per local search (scipy's default otherwise).
+    x_scale : ndarray, shape (space.n,), or "jac"
+        Scale of the internal coordinates, as :func:`scipy.optimize.least_squares` takes it.
+    strategy : str, optional
+        Global search run first over the whole box (see above); default none.
+    rng : int, Generator or None
+        Seed of the global search.
+
+    Returns
+    -------
+    ParameterEstimate
+        The best start's optimum with its local uncertainty; ``success=False`` with the message where every start
+        failed.
+
+    Raises
+    ------
+    ModelError
+        A global search is asked for and an unknown has an infinite bound.
     """
     return least_squares_fit(method, space, residuals, jacobian, starts=starts, noise_variance=noise_variance,
                              diagnostics=diagnostics, max_nfev=max_nfev, x_scale=x_scale, strategy=strategy,

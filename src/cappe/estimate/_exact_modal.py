@@ -43,6 +43,23 @@ class ExactModalProblem:
     is analytic (first-order perturbation of each set's state-matrix eigen-decomposition, see :meth:`jacobian`),
     with the pairing of the point. The sets are evaluated side by side on a thread ``executor``.
 
+    Parameters
+    ----------
+    model : NumericModel
+        The model whose unknowns are refined.
+    space : ParameterSpace
+        The unknowns (SI vectors of ``space.n``).
+    reference : ModalData
+        Reference modes (Hz, damping ratios, complex shapes at the model's sensor channels) at one or more
+        positions.
+    weights : (float, float, float)
+        ``(w_f, w_z, w_s)``: weights of the frequency, damping and shape residuals (used without ``noise``).
+    noise : (float, float, float), optional
+        ``(s_f, s_z, s_s)``: relative noise of the frequencies, damping ratios and shape components; replaces
+        ``weights`` by the noise standard deviations.
+    executor : Executor, optional
+        A ``"threads"`` executor evaluates the sets side by side; any other (or None) runs them serially.
+
     Examples
     --------
     >>> from cappe.model import load_model
@@ -134,13 +151,35 @@ class ExactModalProblem:
         return out
 
     def residuals(self, p: Array) -> Array:
-        """Residual vector at unknowns ``p`` (SI)."""
+        """Residual vector at unknowns ``p`` (SI).
+
+        Parameters
+        ----------
+        p : ndarray, shape (space.n,)
+            The unknowns in SI units.
+
+        Returns
+        -------
+        ndarray, shape (n_r,)
+            Dimensionless residuals (relative frequency and damping errors, shape residuals), weighted.
+        """
         return self._evaluate(np.asarray(p, dtype=float))[0]
 
     def jacobian(self, p: Array) -> Array:
         """``d r / d p`` (n_r, n), analytic: first-order perturbation of the state matrix's eigen-decomposition
         (:func:`cappe.modal.exact_mode_derivatives`), one per set instead of one per unknown; the residuals are
-        invariant to the complex scale of a shape, which the shape derivatives leave out."""
+        invariant to the complex scale of a shape, which the shape derivatives leave out.
+
+        Parameters
+        ----------
+        p : ndarray, shape (space.n,)
+            The unknowns in SI units.
+
+        Returns
+        -------
+        ndarray, shape (n_r, space.n)
+            Derivatives of the residuals by the SI unknowns (1 / unit of each unknown).
+        """
         p = np.asarray(p, dtype=float)
         _, _, paired = self._evaluate(p)
         full = self.space.full(p[None, :])[0]
@@ -185,7 +224,18 @@ class ExactModalProblem:
         return np.concatenate(parts, axis=0)
 
     def pairing_report(self, p: Array) -> list[dict[str, Any]]:
-        """Per set: the model mode paired with each reference mode at ``p``."""
+        """Per set: the model mode paired with each reference mode at ``p``.
+
+        Parameters
+        ----------
+        p : ndarray, shape (space.n,)
+            The unknowns in SI units.
+
+        Returns
+        -------
+        list of dict
+            Per reference set ``{"position": {...}, "model_mode": [model mode index (0-based) per reference mode]}``.
+        """
         _, pairs, _ = self._evaluate(np.asarray(p, dtype=float))
         return [{"position": dict(s.position), "model_mode": idx.tolist()}
                 for s, idx in zip(self.reference.sets, pairs, strict=True)]

@@ -36,6 +36,8 @@ class HybridEstimator(Estimator):
     settings : mapping, optional
         ``{method: {keyword: value}}`` passed to each stage's constructor.
 
+    Notes
+    -----
     ``fit(data)`` takes one data object used by every stage, or a mapping ``{method: data}``. The result is the
     last stage's estimate; the diagnostics hold every stage's values, cost and success.
     """

@@ -956,6 +956,19 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
     ``kappa``. Every sigma point is propagated through the exact ZOH transition at its own parameters; no
     Jacobians are used.
 
+    Parameters
+    ----------
+    model, unknowns, bounds, start, values, rng
+        See :class:`Estimator`.
+    inputs, outputs, position, noise, process_noise, random_walk, passes, tol, initial_state, inflation
+        As for :class:`ExtendedKalmanEstimator`.
+    alpha : float
+        Spread of the sigma points around the mean, 0 < alpha <= 1 (dimensionless).
+    beta : float
+        Prior-distribution term of the covariance weights (2 is optimal for a Gaussian prior).
+    kappa : float
+        Secondary scaling of the spread (dimensionless; ``n + kappa > 0``).
+
     Examples
     --------
     >>> from cappe.model import NumericModel, load_model

@@ -611,6 +611,9 @@ class FRFDerivatives:
     dH : ndarray of complex, shape (n_params, n_out, n_in, n_freq)
         ``dH / dp`` per parameter unit.
     parameter_names, input_names, output_names : tuple of str
+        Names along the first axis of ``dH`` and the input and output axes of ``H``.
+    position : dict
+        Axis position of the model, ``{axis: value}`` (m or rad); empty for a model without axes.
     """
 
     freq: Array

@@ -24,7 +24,28 @@ METHODS: dict[str, tuple[str, str, str]] = {
 
 
 def estimator_class(method: str) -> Any:
-    """The estimator class of a method name; unknown names list the known ones."""
+    """The estimator class of a method name; unknown names list the known ones.
+
+    Parameters
+    ----------
+    method : str
+        A key of :data:`METHODS` (``"direct"``, ``"one-step"``, ``"modal"`` ...).
+
+    Returns
+    -------
+    type
+        The :class:`~cappe.estimate.Estimator` subclass (its module is imported on first use).
+
+    Raises
+    ------
+    ModelError
+        ``method`` is not registered.
+
+    Examples
+    --------
+    >>> estimator_class("modal").__name__
+    'ModalUpdatingEstimator'
+    """
     from cappe.exceptions import ModelError
 
     try:

@@ -50,6 +50,21 @@ class Profile:
     ``values`` (SI) on the grid, ``cost`` the re-optimized cost there, ``ci95`` where ``cost - min`` crosses
     ``3.84 s^2`` (``nan`` on a side where it never does inside the bounds: the interval is open there), and
     ``identifiable`` False when it stays open on both sides.
+
+    Attributes
+    ----------
+    name : str
+        The profiled unknown.
+    values : ndarray, shape (n_points,)
+        Grid of the unknown (SI).
+    cost : ndarray, shape (n_points,)
+        ``|r|^2`` with the other unknowns re-optimized (residual units squared).
+    threshold : float
+        ``min cost + 3.84 s^2``, the cost at the bounds of the 95 % interval.
+    ci95 : (float, float)
+        Lower and upper bound of the 95 % interval (SI; ``nan`` where open).
+    identifiable : bool
+        False when the interval is open on both sides.
     """
 
     name: str
@@ -85,6 +100,33 @@ def profile_likelihood(
     The grid covers ``span`` local standard errors either side of the estimate (the whole bound range when the
     local error is undefined), clipped to the bounds, in the unknown's internal coordinate. ``residuals(p)`` takes the
     full unknown vector of ``space`` (SI), as for :func:`fit_least_squares`.
+
+    Parameters
+    ----------
+    space : ParameterSpace
+        The unknowns, their bounds and transformation.
+    residuals : callable
+        ``residuals(p)`` -> ndarray, shape (n_obs,), for an SI vector ``p``, shape (space.n,).
+    estimate : ParameterEstimate
+        The optimum (its values and standard errors set the grid).
+    name : str
+        The unknown to profile.
+    n_points : int
+        Grid points (each a least-squares fit of the others).
+    span : float
+        Half-width of the grid in local standard errors.
+    noise_variance : float, optional
+        Variance of the residuals' noise (residual units squared); default estimated from the estimate's cost and
+        degrees of freedom.
+
+    Returns
+    -------
+    Profile
+
+    Raises
+    ------
+    DataError
+        ``name`` is not an unknown, or it has neither finite bounds nor a local standard error.
 
     Examples
     --------
@@ -151,7 +193,21 @@ def _crossing(x: Array, cost: Array, threshold: float, *, k_side: int, centre: f
 
 @dataclass(frozen=True)
 class BootstrapResult:
-    """Re-estimates from simulated data: ``samples`` (n_ok, n) in SI, their std and percentile 95 % intervals."""
+    """Re-estimates from simulated data: ``samples`` (n_ok, n) in SI, their std and percentile 95 % intervals.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The unknowns, in the order of the columns.
+    samples : ndarray, shape (n_ok, n)
+        The converged re-estimates (SI).
+    std : ndarray, shape (n,)
+        Their standard deviations (SI).
+    ci95 : ndarray, shape (n, 2)
+        2.5 and 97.5 percentiles (SI).
+    n_failed : int
+        Re-fits that did not converge (left out).
+    """
 
     names: tuple[str, ...]
     samples: Array
@@ -180,6 +236,26 @@ def parametric_bootstrap(
 
     ``simulate`` returns data in the form the estimator's ``fit`` takes, made at the parameter values given (the
     current estimate) with fresh noise. Re-fits that do not converge are counted, not used.
+
+    Parameters
+    ----------
+    estimator : Estimator
+        A fitted estimator; each re-fit is a copy with its settings (``get_params``).
+    simulate : callable
+        ``simulate(parameters, rng)`` -> data, with ``parameters`` ``{name: value}`` (SI) and a numpy Generator.
+    n : int
+        Number of simulated data sets.
+    rng : int, Generator or None
+        Seed of the simulations.
+
+    Returns
+    -------
+    BootstrapResult
+
+    Raises
+    ------
+    NotFittedError
+        ``estimator`` is not fitted.
     """
     first = estimator.estimate_
     gen = as_generator(rng)
@@ -205,7 +281,21 @@ def parametric_bootstrap(
 
 @dataclass(frozen=True)
 class PosteriorSample:
-    """MCMC draws (n_draws, n) in SI with posterior mean, std, 95 % credible intervals and acceptance fraction."""
+    """MCMC draws (n_draws, n) in SI with posterior mean, std, 95 % credible intervals and acceptance fraction.
+
+    Attributes
+    ----------
+    names : tuple of str
+        The unknowns, in the order of the columns.
+    samples : ndarray, shape (n_draws, n)
+        The draws after burn-in, all walkers (SI).
+    mean, std : ndarray, shape (n,)
+        Posterior mean and standard deviation (SI).
+    ci95 : ndarray, shape (n, 2)
+        2.5 and 97.5 percentiles (SI).
+    acceptance : float
+        Mean acceptance fraction of the walkers (0..1).
+    """
 
     names: tuple[str, ...]
     samples: Array
@@ -237,7 +327,32 @@ def mcmc_posterior(
     rng: RandomLike = None,
 ) -> PosteriorSample:
     """Posterior ``exp(-|r(p)|^2 / (2 s^2))`` with a flat prior on the internal coordinates inside the bounds
-    (log-uniform for log-searched parameters), sampled with emcee from a ball around the estimate."""
+    (log-uniform for log-searched parameters), sampled with emcee from a ball around the estimate.
+
+    Parameters
+    ----------
+    space : ParameterSpace
+        The unknowns, their bounds and transformation.
+    residuals : callable
+        ``residuals(p)`` -> ndarray, shape (n_obs,), for an SI vector ``p``, shape (space.n,).
+    estimate : ParameterEstimate
+        The optimum: the walkers start around it.
+    noise_variance : float, optional
+        ``s^2``, the variance of the residuals' noise (residual units squared); default estimated from the
+        estimate's cost and degrees of freedom.
+    n_walkers : int, optional
+        Ensemble size (default ``max(4 n, 8)``).
+    n_steps : int
+        Steps per walker.
+    burn : int
+        Steps per walker discarded at the start.
+    rng : int, Generator or None
+        Seed of the start ball and of emcee's moves.
+
+    Returns
+    -------
+    PosteriorSample
+    """
     import emcee
 
     r0 = np.asarray(residuals(estimate.values), dtype=float)

@@ -90,7 +90,27 @@ class ParameterEstimate:
         message: str = "",
         diagnostics: Mapping[str, Any] | None = None,
     ) -> ParameterEstimate:
-        """Assemble from :func:`jacobian_uncertainty` output; rank and condition go to the diagnostics."""
+        """Assemble from :func:`jacobian_uncertainty` output; rank and condition go to the diagnostics.
+
+        Parameters
+        ----------
+        method : str
+            Estimator name.
+        uncertainty : LocalUncertainty
+            Values, standard errors, intervals and correlation of the unknowns (SI).
+        cost : float
+            Final value of the method's cost.
+        success : bool
+            Whether the method converged.
+        message : str
+            Why it stopped.
+        diagnostics : mapping, optional
+            Method-specific details, added after rank, condition number and degrees of freedom.
+
+        Returns
+        -------
+        ParameterEstimate
+        """
         diag = {"rank": uncertainty.rank, "condition_number": uncertainty.condition_number,
                 "degrees_of_freedom": uncertainty.dof, **(diagnostics or {})}
         return cls(
@@ -103,7 +123,23 @@ class ParameterEstimate:
     def failed(
         cls, method: str, names: Sequence[str], message: str, diagnostics: Mapping[str, Any] | None = None
     ) -> ParameterEstimate:
-        """A result without usable values: everything ``nan``, nothing identifiable, ``success`` False."""
+        """A result without usable values: everything ``nan``, nothing identifiable, ``success`` False.
+
+        Parameters
+        ----------
+        method : str
+            Estimator name.
+        names : sequence of str
+            The unknowns.
+        message : str
+            Why the method failed.
+        diagnostics : mapping, optional
+            Method-specific details.
+
+        Returns
+        -------
+        ParameterEstimate
+        """
         n = len(names)
         nan = np.full(n, np.nan)
         return cls(method, tuple(names), nan, nan, np.column_stack([nan, nan]), np.full((n, n), np.nan),
@@ -115,7 +151,18 @@ class ParameterEstimate:
         return {n: float(v) for n, v in zip(self.names, self.values, strict=True)}
 
     def relative_error(self, truth: Mapping[str, float]) -> dict[str, float]:
-        """``(estimate - truth) / truth`` per unknown (for studies and tests)."""
+        """``(estimate - truth) / truth`` per unknown (for studies and tests).
+
+        Parameters
+        ----------
+        truth : mapping name -> float
+            True value of every unknown (SI).
+
+        Returns
+        -------
+        dict
+            ``{name: relative error}`` (dimensionless; 0.01 is 1 % high).
+        """
         return {n: float(v / truth[n] - 1.0) for n, v in zip(self.names, self.values, strict=True)}
 
     def to_dict(self) -> dict[str, Any]:
@@ -162,6 +209,24 @@ class ParameterEstimate:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any], source: str = "<dict>") -> ParameterEstimate:
+        """Validate a parsed ``cappe.estimate/1`` document (the inverse of :meth:`to_dict`).
+
+        Parameters
+        ----------
+        data : mapping
+            The document.
+        source : str
+            Where it came from (a file name), for messages.
+
+        Returns
+        -------
+        ParameterEstimate
+
+        Raises
+        ------
+        DataError
+            The format is not ``cappe.estimate/1`` or an entry is missing or malformed.
+        """
         if data.get("format") != ESTIMATE_FORMAT:
             msg = f"{source}: format must be {ESTIMATE_FORMAT!r}; got {data.get('format')!r}"
             raise DataError(msg)
@@ -214,12 +279,40 @@ def _plain(value: Any) -> Any:
 
 
 def write_estimate(path: str | Path, estimate: ParameterEstimate) -> Path:
-    """Write ``cappe.estimate/1`` JSON atomically."""
+    """Write ``cappe.estimate/1`` JSON atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    estimate : ParameterEstimate
+        The estimate.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     return write_json(path, estimate.to_dict())
 
 
 def read_estimate(path: str | Path) -> ParameterEstimate:
-    """Read ``cappe.estimate/1`` JSON."""
+    """Read ``cappe.estimate/1`` JSON.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    ParameterEstimate
+
+    Raises
+    ------
+    DataError
+        The file cannot be read or is not a valid ``cappe.estimate/1`` document (the message names the file).
+    """
     p = Path(path)
     data = read_json(p, "estimate file")
     if not isinstance(data, Mapping):

@@ -78,6 +78,26 @@ class ParameterSpace:
         """Unknowns (default: those marked ``unknown`` in the model), bounds (default: the model's), start
         (default: the model's values) and the known parameters' values (``values`` overrides nominal ones).
 
+        Parameters
+        ----------
+        model : NumericModel or Structure
+            The model whose parameters are estimated.
+        unknowns : sequence of str, optional
+            Parameters to estimate, in the order of every vector (default: those marked ``unknown``).
+        bounds : mapping name -> (lower, upper), optional
+            Bounds of some unknowns in SI units, overriding the model's (no bounds: unbounded).
+        start : mapping name -> float, optional
+            Start values of some unknowns (SI), inside their bounds.
+        values : mapping name -> float, optional
+            Values of any parameters (SI) for the base vector, overriding the model's nominal values.
+        log : bool or mapping name -> bool
+            Search in ``log(p)`` where the bounds allow it (``0 < lower``, finite ``upper``); otherwise linearly,
+            divided by the largest finite bound (or the start).
+
+        Returns
+        -------
+        ParameterSpace
+
         Raises
         ------
         ModelError
@@ -133,13 +153,35 @@ class ParameterSpace:
         return len(self.names)
 
     def to_internal(self, values: ArrayLike) -> Array:
-        """Optimizer coordinates of SI values (..., n)."""
+        """Optimizer coordinates of SI values (..., n).
+
+        Parameters
+        ----------
+        values : array_like, shape (..., n)
+            Values of the unknowns in SI units.
+
+        Returns
+        -------
+        ndarray, shape (..., n)
+            ``log(|p|)`` for log-searched unknowns, ``p / scale`` for the others (dimensionless).
+        """
         p = np.asarray(values, dtype=float)
         with np.errstate(divide="ignore", invalid="ignore"):
             return np.where(self.log, np.log(np.abs(p)), p / self.scale)
 
     def from_internal(self, internal: ArrayLike) -> Array:
-        """SI values of optimizer coordinates (..., n)."""
+        """SI values of optimizer coordinates (..., n).
+
+        Parameters
+        ----------
+        internal : array_like, shape (..., n)
+            Optimizer coordinates (dimensionless).
+
+        Returns
+        -------
+        ndarray, shape (..., n)
+            Values of the unknowns in SI units.
+        """
         u = np.asarray(internal, dtype=float)
         return np.where(self.log, np.exp(u), u * self.scale)
 
@@ -148,23 +190,73 @@ class ParameterSpace:
         return self.to_internal(self.lower), self.to_internal(self.upper)
 
     def value_jacobian(self, internal: ArrayLike) -> Array:
-        """``dp/du`` (..., n): the diagonal of the transformation's Jacobian (chain rule for gradients)."""
+        """``dp/du`` (..., n): the diagonal of the transformation's Jacobian (chain rule for gradients).
+
+        Parameters
+        ----------
+        internal : array_like, shape (..., n)
+            Optimizer coordinates (dimensionless).
+
+        Returns
+        -------
+        ndarray, shape (..., n)
+            ``p`` for log-searched unknowns, ``scale`` for the others (SI units of each unknown).
+        """
         u = np.asarray(internal, dtype=float)
         return np.where(self.log, np.exp(u), self.scale)
 
     def full(self, values: ArrayLike) -> Array:
-        """Full model parameter vectors (..., n_params) with the unknowns set to ``values`` (..., n)."""
+        """Full model parameter vectors (..., n_params) with the unknowns set to ``values`` (..., n).
+
+        Parameters
+        ----------
+        values : array_like, shape (..., n)
+            Values of the unknowns in SI units.
+
+        Returns
+        -------
+        ndarray, shape (..., n_params)
+            ``base`` with the unknowns' columns replaced (SI).
+        """
         p = np.asarray(values, dtype=float)
         out = np.broadcast_to(self.base, (*p.shape[:-1], self.base.size)).copy()
         out[..., self.columns] = p
         return out
 
     def mapping(self, values: ArrayLike) -> dict[str, float]:
-        """``{name: value}`` of one vector."""
+        """``{name: value}`` of one vector.
+
+        Parameters
+        ----------
+        values : array_like, shape (n,)
+            Values of the unknowns (SI).
+
+        Returns
+        -------
+        dict
+            ``{name: float}`` in the order of ``names``.
+        """
         return {n: float(v) for n, v in zip(self.names, np.asarray(values, dtype=float), strict=True)}
 
     def vector(self, values: Mapping[str, float], what: str = "values") -> Array:
-        """A vector (n,) from a mapping that names every unknown."""
+        """A vector (n,) from a mapping that names every unknown.
+
+        Parameters
+        ----------
+        values : mapping name -> float
+            A value (SI) for every unknown; other names are ignored.
+        what : str
+            What the values are, for the message.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+
+        Raises
+        ------
+        ModelError
+            An unknown is missing from ``values``.
+        """
         missing = [n for n in self.names if n not in values]
         if missing:
             msg = f"{what} must give every unknown; missing {missing}"
@@ -172,7 +264,25 @@ class ParameterSpace:
         return np.array([float(values[n]) for n in self.names])
 
     def fixing(self, name: str, value: float) -> ParameterSpace:
-        """The space without unknown ``name``, which is held at ``value`` (for profiles and staged fits)."""
+        """The space without unknown ``name``, which is held at ``value`` (for profiles and staged fits).
+
+        Parameters
+        ----------
+        name : str
+            The unknown to fix.
+        value : float
+            Its value (SI), written into ``base``.
+
+        Returns
+        -------
+        ParameterSpace
+            The other ``n - 1`` unknowns.
+
+        Raises
+        ------
+        ModelError
+            ``name`` is not an unknown.
+        """
         if name not in self.names:
             msg = f"{name!r} is not among the unknowns {list(self.names)}"
             raise ModelError(msg)

@@ -23,7 +23,25 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class StudyResult:
-    """Estimates of every run: ``estimates[level, seed, parameter]`` (nan where a run failed)."""
+    """Estimates of every run: ``estimates[level, seed, parameter]`` (nan where a run failed).
+
+    Attributes
+    ----------
+    method : str
+        The estimation method.
+    names : tuple of str
+        The unknowns.
+    truth : ndarray, shape (n,)
+        Their true values (SI).
+    noise_levels : ndarray, shape (n_levels,)
+        Relative noise of each level (0.01 = 1 %).
+    seeds : tuple of int
+        The seeds of the runs at every level.
+    estimates : ndarray, shape (n_levels, n_seeds, n)
+        Estimates (SI; nan where a run failed).
+    success : ndarray of bool, shape (n_levels, n_seeds)
+        Which runs converged.
+    """
 
     method: str
     names: tuple[str, ...]
@@ -95,6 +113,29 @@ def simulate_data(
     noise of ``noise`` times its RMS. ``"frf"``: H1 FRFs estimated from such data. ``"modal"``: the exact modes
     at the default position with frequency and damping multiplied by ``1 + noise * N(0, 1)``, and complex noise of
     ``noise`` times each shape's largest component on the shapes.
+
+    Parameters
+    ----------
+    model : NumericModel
+        The model.
+    kind : {"time", "frf", "modal"}
+        The kind of data (``cappe.estimate.METHODS[method][2]``).
+    truth : mapping name -> float
+        Parameter values (SI) the data are simulated at; the others keep their nominal values.
+    noise : float
+        Relative noise (0.01 = 1 %).
+    rng : Generator
+        Source of the forces and the noise.
+    fs : float
+        Sampling rate in Hz (time and FRF data).
+    duration : float
+        Record length in s (time and FRF data).
+    band : (float, float), optional
+        Frequency band of the random forces in Hz (default ``(0, fs / 2.56)``).
+
+    Returns
+    -------
+    TimeData, FRFData or ModalData
     """
     from cappe.identify import estimate_frf, random_noise
     from cappe.systems import TimeData, time_response
@@ -141,6 +182,38 @@ def simulation_study(
     duration: float = 4.0,
 ) -> StudyResult:
     """Repeat simulate -> estimate for every noise level and seed.
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model; it simulates the data and is estimated.
+    method : str
+        A method of :data:`METHODS`.
+    truth : mapping name -> float
+        Parameter values (SI) the data are simulated at.
+    unknowns : sequence of str, optional
+        Parameters to estimate (default: those marked ``unknown``).
+    noise_levels : sequence of float
+        Relative noise levels (0.01 = 1 %).
+    seeds : sequence of int
+        Seeds of the runs at every level (each run's data and the estimator's ``rng``).
+    start : mapping name -> float, optional
+        Start values of the estimation (SI; default the model's).
+    settings : mapping, optional
+        Keyword settings of the estimator.
+    fs : float
+        Sampling rate in Hz of simulated time and FRF data.
+    duration : float
+        Record length in s of simulated time and FRF data.
+
+    Returns
+    -------
+    StudyResult
+
+    Raises
+    ------
+    ModelError
+        ``method`` is not registered.
 
     Examples
     --------

@@ -34,6 +34,33 @@ class LocalUncertainty:
     """Standard errors, 95 % intervals, correlations and identifiability at an optimum.
 
     ``std`` and the intervals are ``nan`` for non-identifiable parameters (a bare number would be a lie).
+
+    Attributes
+    ----------
+    names : tuple of str
+        The parameters, in the order of the arrays.
+    values : ndarray, shape (n,)
+        Estimates (SI).
+    covariance : ndarray, shape (n, n)
+        Covariance of the estimates (SI units squared), pseudo-inverse on the determined subspace.
+    std : ndarray, shape (n,)
+        Standard errors (SI; nan for non-identifiable parameters).
+    ci95 : ndarray, shape (n, 2)
+        95 % intervals (Student t with ``dof`` degrees of freedom).
+    correlation : ndarray, shape (n, n)
+        Correlation matrix (nan off the diagonal for non-identifiable parameters).
+    identifiable : ndarray of bool, shape (n,)
+        False for parameters with weight in an undetermined direction.
+    rank : int
+        Numerical rank of the relative-sensitivity Jacobian.
+    condition_number : float
+        Largest over smallest kept singular value (inf at rank 0).
+    singular_values : ndarray, shape (n,)
+        Singular values of the Jacobian with columns scaled by ``|p|``.
+    combinations : tuple of str
+        Undetermined directions, e.g. ``"+0.71 m1 -0.71 m2"``.
+    dof : int
+        Degrees of freedom ``max(n_obs - n, 1)``.
     """
 
     names: tuple[str, ...]

@@ -108,7 +108,23 @@ class ValidationResult:
     overlay: Mapping[str, Any]
 
     def values(self, criterion: str) -> Array:
-        """The finite values of one criterion (``frac``, ``csf``, ``macxp``, ``ndd``, ``nfd``), flattened."""
+        """The finite values of one criterion (``frac``, ``csf``, ``macxp``, ``ndd``, ``nfd``), flattened.
+
+        Parameters
+        ----------
+        criterion : {"frac", "csf", "macxp", "ndd", "nfd"}
+            The criterion.
+
+        Returns
+        -------
+        ndarray, shape (n_finite,)
+            Its finite values (dimensionless).
+
+        Raises
+        ------
+        DataError
+            ``criterion`` is not one of these.
+        """
         if criterion not in ("frac", "csf", "macxp", "ndd", "nfd"):
             msg = f"criterion must be one of frac, csf, macxp, ndd, nfd; got {criterion!r}"
             raise DataError(msg)
@@ -150,6 +166,18 @@ class ValidationResult:
 def summarize(values: ArrayLike, *, larger_is_better: bool) -> dict[str, float]:
     """Worst value, 5 % worst tail, mean and median of a criterion (NaN when there are no values).
 
+    Parameters
+    ----------
+    values : array_like
+        Values of the criterion, any shape; non-finite ones are left out.
+    larger_is_better : bool
+        True for correlations (FRAC, CSF, MACXP: worst is the minimum), False for errors (NFD, NDD).
+
+    Returns
+    -------
+    dict
+        ``{"worst", "p5", "mean", "median"}``; ``p5`` is the 5th (or 95th) percentile.
+
     Examples
     --------
     >>> summarize([0.9, 1.0, 0.8], larger_is_better=True)["worst"]
@@ -166,7 +194,27 @@ def summarize(values: ArrayLike, *, larger_is_better: bool) -> dict[str, float]:
 
 
 def find_set(reference: ModalData, position: Mapping[str, float], model: NumericModel) -> int:
-    """Index of the reference set at ``position`` (axis values compared to 1e-9 m); DataError naming the positions."""
+    """Index of the reference set at ``position`` (axis values compared to 1e-9 m); DataError naming the positions.
+
+    Parameters
+    ----------
+    reference : ModalData
+        Reference modes at one or more positions.
+    position : mapping axis -> float
+        The axis position sought (m or rad); axes not given take the model's defaults.
+    model : NumericModel
+        The model whose axes resolve the positions.
+
+    Returns
+    -------
+    int
+        Index into ``reference.sets``.
+
+    Raises
+    ------
+    DataError
+        No set is at ``position``.
+    """
     wanted = model.position_vector(model.structure.resolve_position(position))
     for k, data_set in enumerate(reference.sets):
         have = model.position_vector(model.structure.resolve_position(data_set.position))
@@ -193,6 +241,24 @@ def model_receptance(
 
     ``H = S_out (K + i H + i omega (C + G) - omega^2 M)^-1 S_in^T``, where ``S`` are the sensor rows of the
     channels (a unit force at the sensor point along the channel's direction).
+
+    Parameters
+    ----------
+    model : NumericModel
+        The model.
+    params : array_like, shape (n_params,)
+        Full parameter vector (SI).
+    position : mapping axis -> float or None
+        Axis position (m or rad); None for the default.
+    freq : array_like, shape (n_freq,)
+        Frequencies in Hz.
+    outputs, inputs : sequence of str
+        Sensor channels (``"node:x"``) of the response and of the force.
+
+    Returns
+    -------
+    ndarray of complex, shape (n_out, n_in, n_freq)
+        Receptance in m/N (rad/N m for rotational channels).
 
     Examples
     --------
