@@ -23,14 +23,36 @@ __all__ = [
 
 
 def exact_rank(matrix: sp.Matrix) -> int:
-    """Rank over the rationals (exact), by fraction-free elimination."""
+    """Rank over the rationals (exact), by fraction-free elimination.
+
+    Parameters
+    ----------
+    matrix : sympy.Matrix
+        A matrix of rational (or integer) entries.
+
+    Returns
+    -------
+    int
+    """
     if matrix.rows == 0 or matrix.cols == 0:
         return 0
     return int(DomainMatrix.from_Matrix(sp.Matrix(matrix)).convert_to(sp.QQ).rank())
 
 
 def float_rank(matrix: sp.Matrix | np.ndarray[Any, Any], tol: float | None = None) -> int:
-    """Rank in double precision by SVD with numpy's default tolerance ``S.max() * max(shape) * eps``."""
+    """Rank in double precision by SVD with numpy's default tolerance ``S.max() * max(shape) * eps``.
+
+    Parameters
+    ----------
+    matrix : sympy.Matrix or ndarray, shape (rows, cols)
+        A numeric matrix (sympy entries are converted to floats).
+    tol : float, optional
+        Singular values at or below it count as zero (same units as the entries).
+
+    Returns
+    -------
+    int
+    """
     arr = np.array(matrix, dtype=float) if isinstance(matrix, sp.MatrixBase) else np.asarray(matrix, float)
     if arr.size == 0:
         return 0
@@ -42,6 +64,17 @@ def invertibility_matrix(ss: ExactStateSpace, k: int) -> sp.Matrix:
 
     Block (i, j) for i, j = 0..k is D when i == j, C A^(i-j-1) B when i > j, zero otherwise; its size is
     ((k+1) r) x ((k+1) m) for r outputs and m inputs.
+
+    Parameters
+    ----------
+    ss : ExactStateSpace
+        The realization.
+    k : int
+        Highest Markov parameter index (``k >= 0``).
+
+    Returns
+    -------
+    sympy.Matrix, shape ((k+1) r, (k+1) m)
     """
     r, m = ss.D.shape
     markov = [ss.D]
@@ -58,7 +91,21 @@ def invertibility_matrix(ss: ExactStateSpace, k: int) -> sp.Matrix:
 
 @dataclass(frozen=True)
 class InvertibilityResult:
-    """Sain-Massey test: invertible iff m <= r and rank(M_n) - rank(M_{n-1}) == m."""
+    """Sain-Massey test: invertible iff m <= r and rank(M_n) - rank(M_{n-1}) == m.
+
+    Attributes
+    ----------
+    n_states : int
+        n, the order of the realization.
+    n_inputs, n_outputs : int
+        m and r.
+    exact_ranks : (int, int)
+        Exact ranks of M_{n-1} and M_n.
+    float_ranks : (int, int)
+        Their double-precision ranks (SVD).
+    matrix_shape : (int, int)
+        Shape of M_n.
+    """
 
     n_states: int
     n_inputs: int
@@ -95,7 +142,17 @@ class InvertibilityResult:
 
 
 def sain_massey(ss: ExactStateSpace) -> InvertibilityResult:
-    """Invertibility test of Sain & Massey (1969), exactly and in double precision side by side."""
+    """Invertibility test of Sain & Massey (1969), exactly and in double precision side by side.
+
+    Parameters
+    ----------
+    ss : ExactStateSpace
+        The realization (rational entries for the exact ranks).
+
+    Returns
+    -------
+    InvertibilityResult
+    """
     n = ss.A.rows
     m_n = invertibility_matrix(ss, n)
     r, m = ss.D.shape
@@ -111,7 +168,20 @@ def sain_massey(ss: ExactStateSpace) -> InvertibilityResult:
 
 
 def controllability_rank(ss: ExactStateSpace, *, exact: bool = True) -> int:
-    """Rank of [B, AB, ..., A^(n-1) B]."""
+    """Rank of [B, AB, ..., A^(n-1) B].
+
+    Parameters
+    ----------
+    ss : ExactStateSpace
+        The realization.
+    exact : bool
+        Rank over the rationals (True) or in double precision (False).
+
+    Returns
+    -------
+    int
+        n for a controllable realization.
+    """
     blocks = [ss.B]
     for _ in range(ss.A.rows - 1):
         blocks.append(ss.A * blocks[-1])
@@ -120,7 +190,20 @@ def controllability_rank(ss: ExactStateSpace, *, exact: bool = True) -> int:
 
 
 def observability_rank(ss: ExactStateSpace, *, exact: bool = True) -> int:
-    """Rank of [C; CA; ...; C A^(n-1)]."""
+    """Rank of [C; CA; ...; C A^(n-1)].
+
+    Parameters
+    ----------
+    ss : ExactStateSpace
+        The realization.
+    exact : bool
+        Rank over the rationals (True) or in double precision (False).
+
+    Returns
+    -------
+    int
+        n for an observable realization.
+    """
     blocks = [ss.C]
     for _ in range(ss.A.rows - 1):
         blocks.append(blocks[-1] * ss.A)

@@ -18,7 +18,22 @@ __all__ = ["ExactStateSpace", "exact_state_space", "rational_values", "to_ration
 
 
 def to_rational(value: object) -> sp.Rational:
-    """The exact rational a decimal number denotes (1.39 -> 139/100, not the binary float)."""
+    """The exact rational a decimal number denotes (1.39 -> 139/100, not the binary float).
+
+    Parameters
+    ----------
+    value : float, int, str or sympy number
+        The number (a float by its shortest decimal repr).
+
+    Returns
+    -------
+    sympy.Rational
+
+    Examples
+    --------
+    >>> to_rational(1.39)
+    139/100
+    """
     if isinstance(value, sp.Rational):
         return value
     if isinstance(value, float):
@@ -53,7 +68,21 @@ def warn_hysteretic(model: SymbolicModel) -> None:
 
 @dataclass(frozen=True)
 class ExactStateSpace:
-    """Exact (rational or symbolic) realization with x = [q, q']."""
+    """Exact (rational or symbolic) realization with x = [q, q'].
+
+    Attributes
+    ----------
+    A : sympy.Matrix, shape (2 n_dof, 2 n_dof)
+        State matrix (1/s).
+    B : sympy.Matrix, shape (2 n_dof, n_in)
+        Input matrix.
+    C : sympy.Matrix, shape (n_out, 2 n_dof)
+        Output matrix.
+    D : sympy.Matrix, shape (n_out, n_in)
+        Feed-through matrix.
+    input_names, output_names : tuple of str
+        The model's inputs and outputs in the order of the columns of B and the rows of C.
+    """
 
     A: sp.Matrix
     B: sp.Matrix
@@ -72,7 +101,25 @@ def exact_state_space(
     *,
     symbolic: bool = False,
 ) -> ExactStateSpace:
-    """Exact state-space matrices; with ``symbolic=True`` parameters stay symbols (small models only)."""
+    """Exact state-space matrices; with ``symbolic=True`` parameters stay symbols (small models only).
+
+    Parameters
+    ----------
+    model : SymbolicModel
+        The derived model.
+    values : mapping name -> float, optional
+        Parameter values (SI, read as exact decimals); default the model's.
+    position : mapping axis -> float, optional
+        Axis position (m or rad); default the model's.
+    inputs, outputs : sequence of str, optional
+        Model inputs and outputs (default all).
+    symbolic : bool
+        Keep the parameters as symbols instead of substituting ``values`` and ``position``.
+
+    Returns
+    -------
+    ExactStateSpace
+    """
     warn_hysteretic(model)
     ins = list(inputs) if inputs is not None else [i.name for i in model.structure.inputs]
     outs = list(outputs) if outputs is not None else [o.name for o in model.structure.outputs]

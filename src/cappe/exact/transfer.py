@@ -81,6 +81,22 @@ def exact_transfer_function(
 ) -> TransferFunctionModel:
     """Transfer function with exact rational coefficients (parameters read as exact decimals).
 
+    Parameters
+    ----------
+    model : SymbolicModel
+        The derived model.
+    input, output : str
+        Model input and output names.
+    values : mapping name -> float, optional
+        Parameter values (SI); default the model's.
+    position : mapping axis -> float, optional
+        Axis position (m or rad); default the model's.
+
+    Returns
+    -------
+    TransferFunctionModel
+        Coefficients as sympy rationals, s in rad/s.
+
     Examples
     --------
     >>> from cappe.model import load_model, derive
@@ -103,6 +119,22 @@ def symbolic_transfer_function(
 
     ``values`` may fix some parameters (exact rationals); ``position`` fixes axis coordinates (default: the
     symbols stay). Intended for small models: the cost grows quickly with the number of DOFs.
+
+    Parameters
+    ----------
+    model : SymbolicModel
+        The derived model.
+    input, output : str
+        Model input and output names.
+    values : mapping name -> float, optional
+        Parameters to fix (SI); the others stay symbols.
+    position : mapping axis -> float, optional
+        Axis coordinates to fix (m or rad).
+
+    Returns
+    -------
+    TransferFunctionModel
+        Coefficients as sympy expressions, s in rad/s.
     """
     subs = {symbol(k): to_rational(v) for k, v in (values or {}).items()}
     subs.update({symbol(k): to_rational(v) for k, v in (position or {}).items()})
