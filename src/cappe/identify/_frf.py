@@ -154,6 +154,10 @@ class CoherenceSummary:
 
     Attributes
     ----------
+    threshold : float
+        The coherence threshold (0..1).
+    input_names, output_names : tuple of str
+        Channels along the second and first axes of the arrays.
     fraction_below : ndarray, shape (n_out, n_in)
         Fraction of the checked lines with coherence below ``threshold``.
     minimum : ndarray, shape (n_out, n_in)
@@ -176,7 +180,17 @@ class CoherenceSummary:
     freq_of_minimum: Array
 
     def low(self, fraction: float = 0.1) -> list[tuple[str, str]]:
-        """(output, input) pairs whose fraction of low-coherence lines exceeds ``fraction``."""
+        """(output, input) pairs whose fraction of low-coherence lines exceeds ``fraction``.
+
+        Parameters
+        ----------
+        fraction : float
+            Share of the checked lines (0..1) above which a pair is listed.
+
+        Returns
+        -------
+        list of (str, str)
+        """
         rows, cols = np.nonzero(self.fraction_below > fraction)
         return [(self.output_names[r], self.input_names[c]) for r, c in zip(rows, cols, strict=True)]
 
@@ -878,6 +892,19 @@ def coherence_summary(
     """Fraction of lines below a coherence threshold, lowest value and where, per output/input pair.
 
     Lines with a non-finite FRF are skipped. ``CoherenceSummary.low(fraction)`` lists the pairs to look at.
+
+    Parameters
+    ----------
+    frf : FRFData
+        Measured FRFs with their coherence.
+    threshold : float
+        Coherence below which a line counts as low (0..1).
+    band : (float, float), optional
+        Lines checked, in Hz (default all).
+
+    Returns
+    -------
+    CoherenceSummary
 
     Raises
     ------

@@ -187,11 +187,33 @@ class StabilizationDiagram:
         return int(self.poles.size)
 
     def at_order(self, order: int) -> NDArray[np.intp]:
-        """Indices of the poles of one model order."""
+        """Indices of the poles of one model order.
+
+        Parameters
+        ----------
+        order : int
+            The model order.
+
+        Returns
+        -------
+        ndarray of int
+            Indices into the pole arrays.
+        """
         return np.flatnonzero(self.order == order)
 
     def stable(self, flag: str = "s") -> NDArray[np.intp]:
-        """Indices of the poles carrying ``flag``."""
+        """Indices of the poles carrying ``flag``.
+
+        Parameters
+        ----------
+        flag : {"s", "v", "d", "f", "o", "x"}
+            Stability flag (see ``flags``; default all three stable).
+
+        Returns
+        -------
+        ndarray of int
+            Indices into the pole arrays.
+        """
         return np.flatnonzero(self.flags == flag)
 
     def with_tolerances(
@@ -202,7 +224,26 @@ class StabilizationDiagram:
         mac_tol: float | None = None,
         max_damping: float | None = None,
     ) -> StabilizationDiagram:
-        """The same poles flagged with other tolerances (None keeps the current value)."""
+        """The same poles flagged with other tolerances (None keeps the current value).
+
+        Parameters
+        ----------
+        freq_tol, damping_tol : float, optional
+            Largest relative change of frequency and damping ratio to the nearest pole of the previous order.
+        mac_tol : float, optional
+            Smallest MAC between the participation vectors of the two poles (0..1).
+        max_damping : float, optional
+            Poles damped more than this damping ratio are excluded.
+
+        Returns
+        -------
+        StabilizationDiagram
+
+        Raises
+        ------
+        DataError
+            A tolerance is out of range.
+        """
         tol = dict(self.tolerances)
         for key, value in (
             ("freq_tol", freq_tol),

@@ -125,6 +125,23 @@ class ModalFit:
         ``windowed=True`` gives the FRFs as measured through the exponential window (poles shifted by
         ``-1 / window_decay``), for comparison with the data the model was fitted to.
 
+        Parameters
+        ----------
+        freq : array_like, shape (n_freq,)
+            Frequencies in Hz, > 0.
+        windowed : bool
+            Synthesize as seen through the exponential window of the fitted data.
+
+        Returns
+        -------
+        FRFData
+            ``H[out, in, freq]`` in the units of the fitted FRFs.
+
+        Raises
+        ------
+        DataError
+            ``freq`` is not 1-D, finite and > 0.
+
         Examples
         --------
         >>> import numpy as np
@@ -151,7 +168,17 @@ class ModalFit:
         return FRFData(f, H, self.input_names, self.output_names, self.output_quantities)
 
     def to_modal_data(self, position: Mapping[str, float] | None = None) -> ModalData:
-        """The modes as :class:`cappe.systems.ModalData`, one set at ``position``; sensors are the output names."""
+        """The modes as :class:`cappe.systems.ModalData`, one set at ``position``; sensors are the output names.
+
+        Parameters
+        ----------
+        position : mapping axis -> float, optional
+            Axis position of the set (m or rad); empty by default.
+
+        Returns
+        -------
+        ModalData
+        """
         data_set = ModalDataSet(
             dict(position or {}), self.frequency.copy(), self.damping.copy(), self.shapes.astype(complex)
         )
@@ -400,7 +427,17 @@ class ModalExtraction:
         return self.fit.shapes
 
     def to_modal_data(self, position: Mapping[str, float] | None = None) -> ModalData:
-        """See :meth:`ModalFit.to_modal_data`."""
+        """The extracted modes as :class:`cappe.systems.ModalData` (:meth:`ModalFit.to_modal_data`).
+
+        Parameters
+        ----------
+        position : mapping axis -> float, optional
+            Axis position of the set (m or rad); empty by default.
+
+        Returns
+        -------
+        ModalData
+        """
         return self.fit.to_modal_data(position)
 
     def to_dict(self) -> dict[str, Any]:

@@ -106,6 +106,16 @@ def modal_parameters_from_poles(poles: NDArray[np.complexfloating[Any]]) -> Moda
 
     Each pair is represented by its member in the upper half plane; pairs are sorted by natural frequency.
 
+    Parameters
+    ----------
+    poles : ndarray of complex
+        Continuous poles in rad/s, any shape; non-finite ones are skipped.
+
+    Returns
+    -------
+    ModalParameters
+        Frequencies in Hz, damping ratios and the upper poles, ascending in frequency.
+
     Examples
     --------
     >>> import numpy as np
@@ -127,6 +137,15 @@ class DiscreteTransferFunction:
 
     ``numerator`` and ``denominator`` have equal length (zero padded), so they read both as coefficients of
     q^-k at index k and as z-polynomials, highest power first. ``denominator[0] == 1``.
+
+    Attributes
+    ----------
+    numerator, denominator : tuple of float
+        Coefficients of q^-0, q^-1, ... (equal length).
+    dt : float
+        Sample time in s.
+    input, output : str
+        Channel names.
 
     Examples
     --------
@@ -150,7 +169,18 @@ class DiscreteTransferFunction:
         return _roots(np.asarray(self.numerator))
 
     def evaluate(self, freq: Sequence[float] | Array) -> CArray:
-        """Frequency response at ``freq`` (Hz): the value at ``z = exp(2j pi f dt)``."""
+        """Frequency response at ``freq`` (Hz): the value at ``z = exp(2j pi f dt)``.
+
+        Parameters
+        ----------
+        freq : array_like, shape (n_freq,)
+            Frequencies in Hz.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_freq,)
+            In output units per input unit.
+        """
         z = np.exp(2j * np.pi * np.asarray(freq, dtype=float) * self.dt)
         return np.asarray(np.polyval(self.numerator, z) / np.polyval(self.denominator, z), dtype=complex)
 
@@ -793,7 +823,18 @@ class PolynomialModel(Settings, ABC):
         return y - _lfilter(hbar, np.ones(1), e)
 
     def residuals(self, data: TimeData) -> Array:
-        """One-step prediction errors ``y - y_hat(t | t-1)``, shape (n_samples,)."""
+        """One-step prediction errors ``y - y_hat(t | t-1)``, shape (n_samples,).
+
+        Parameters
+        ----------
+        data : TimeData
+            The input and output channels, sampled at the fitted ``dt_``.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+            In the output's unit.
+        """
         u = self._input_arrays(data)
         return _errors(self._polys(), _channel(data, self.output_, "output"), u)[0]
 
@@ -801,6 +842,23 @@ class PolynomialModel(Settings, ABC):
         """Normalized RMS fit ``100 (1 - |y - y_hat| / |y - mean(y)|)`` in %, as MATLAB's ``compare``.
 
         ``horizon`` as in :meth:`predict`; the default compares the simulated output.
+
+        Parameters
+        ----------
+        data : TimeData
+            The input and output channels, sampled at the fitted ``dt_``.
+        horizon : int or inf
+            Prediction horizon in samples (``inf``: simulation).
+
+        Returns
+        -------
+        float
+            Fit in % (100 for a perfect prediction; negative when worse than the mean).
+
+        Raises
+        ------
+        DataError
+            The output is constant.
         """
         y_hat = self.predict(data, horizon)
         y = _channel(data, self.output_, "output")
@@ -824,7 +882,17 @@ class PolynomialModel(Settings, ABC):
         return self.inputs_.index(input)
 
     def to_discrete_tf(self, input: str | None = None) -> DiscreteTransferFunction:  # noqa: A002
-        """Discrete transfer function ``B_i / (A F_i)`` from one input to the output."""
+        """Discrete transfer function ``B_i / (A F_i)`` from one input to the output.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel (may be omitted for a single-input model).
+
+        Returns
+        -------
+        DiscreteTransferFunction
+        """
         i = self._input_index(input)
         num = self.B_[i]
         den = np.convolve(self.A_, self.F_[i])
@@ -839,6 +907,16 @@ class PolynomialModel(Settings, ABC):
         """Discrete poles (z-plane): roots of ``A F_i``, or of A and every F_i when ``input`` is None.
 
         Poles at z = 0 that only stand for input delays are not listed.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel; None for the poles of A and every F_i.
+
+        Returns
+        -------
+        ndarray of complex
+            Discrete poles (dimensionless z).
         """
         self._check_fitted()
         if input is None:
@@ -850,7 +928,18 @@ class PolynomialModel(Settings, ABC):
         return _roots(den)
 
     def zeros(self, input: str | None = None) -> CArray:  # noqa: A002
-        """Discrete zeros (z-plane) of ``B_i``: roots of ``[b0, ..., b_(nb-1)]`` (the delay is not a zero)."""
+        """Discrete zeros (z-plane) of ``B_i``: roots of ``[b0, ..., b_(nb-1)]`` (the delay is not a zero).
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel (may be omitted for a single-input model).
+
+        Returns
+        -------
+        ndarray of complex
+            Discrete zeros (dimensionless z).
+        """
         i = self._input_index(input)
         return _roots(np.trim_zeros(self.B_[i], "f"))
 
@@ -863,6 +952,8 @@ class PolynomialModel(Settings, ABC):
 
         Parameters
         ----------
+        input : str, optional
+            The input channel (may be omitted for a single-input model).
         negative_real : {"error", "reflect"}
             A discrete pole on the negative real axis has no real continuous ZOH equivalent of the same order
             (it maps onto the Nyquist frequency). ``"error"`` raises ModelError; ``"reflect"`` moves such poles to
@@ -936,6 +1027,17 @@ class PolynomialModel(Settings, ABC):
         See :meth:`to_state_space`. Leading numerator coefficients whose term contributes less than 1e-6 of the
         numerator at the Nyquist frequency are dropped: they are round-off (zeros beyond 1e6 x Nyquist) and carry no
         information a model sampled at ``dt`` could hold.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel (may be omitted for a single-input model).
+        negative_real : {"error", "reflect"}
+            As for :meth:`to_state_space`.
+
+        Returns
+        -------
+        TransferFunctionModel
         """
         tf = transfer_function(self.to_state_space(input, negative_real=negative_real))
         num = np.asarray(tf.numerator, dtype=float)
@@ -945,11 +1047,34 @@ class PolynomialModel(Settings, ABC):
         return TransferFunctionModel(tuple(float(c) for c in num[keep:]), tf.denominator, tf.input, tf.output)
 
     def to_zpk(self, input: str | None = None, *, negative_real: str = "error") -> ZeroPoleGainModel:  # noqa: A002
-        """Continuous zero-pole-gain form of :meth:`to_transfer_function`."""
+        """Continuous zero-pole-gain form of :meth:`to_transfer_function`.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel (may be omitted for a single-input model).
+        negative_real : {"error", "reflect"}
+            As for :meth:`to_state_space`.
+
+        Returns
+        -------
+        ZeroPoleGainModel
+        """
         return zpk(self.to_transfer_function(input, negative_real=negative_real))
 
     def continuous_poles(self, input: str | None = None) -> CArray:  # noqa: A002
-        """Continuous poles ``log(z) / dt`` (rad/s) of :meth:`poles`; exact for the ZOH map of poles."""
+        """Continuous poles ``log(z) / dt`` (rad/s) of :meth:`poles`; exact for the ZOH map of poles.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel; None for the poles of A and every F_i.
+
+        Returns
+        -------
+        ndarray of complex
+            Poles in rad/s (``-inf`` for a pole at z = 0).
+        """
         z = self.poles(input)
         with np.errstate(divide="ignore"):
             return np.asarray(np.log(z.astype(complex)) / self.dt_, dtype=complex)
@@ -958,6 +1083,15 @@ class PolynomialModel(Settings, ABC):
         """Frequencies (Hz) and damping ratios of the complex continuous pole pairs, ascending.
 
         Discrete poles on the real axis (non-oscillatory, or at the Nyquist frequency) are not modes.
+
+        Parameters
+        ----------
+        input : str, optional
+            The input channel; None for the poles of A and every F_i.
+
+        Returns
+        -------
+        ModalParameters
         """
         z = self.poles(input)
         pairs = z[np.abs(z.imag) > _REAL_TOL * np.maximum(np.abs(z), 1e-300)]

@@ -172,7 +172,19 @@ class PrunedModel:
         return self.modes.n_modes
 
     def removed_by(self, rule: str) -> tuple[PrunedRoot, ...]:
-        """Removed poles and zeros attributed to one rule."""
+        """Removed poles and zeros attributed to one rule.
+
+        Parameters
+        ----------
+        rule : str
+            ``"cutoff"``, ``"unstable"``, ``"cancellation"``, ``"damping"``, ``"real"``, ``"n_modes"``,
+            ``"min_peak"``, ``"with_pole"`` or ``"properness"`` (see :func:`prune`).
+
+        Returns
+        -------
+        tuple of PrunedRoot
+            Poles first, then zeros.
+        """
         return tuple(r for r in self.removed_poles + self.removed_zeros if r.rule == rule)
 
     def to_dict(self) -> dict[str, Any]:

@@ -84,7 +84,22 @@ class RationalFit:
     rms_error: float
 
     def transfer_function(self, output: str, input: str) -> TransferFunctionModel:  # noqa: A002
-        """The fitted transfer function of one output/input pair."""
+        """The fitted transfer function of one output/input pair.
+
+        Parameters
+        ----------
+        output, input : str
+            Output and input channel names.
+
+        Returns
+        -------
+        TransferFunctionModel
+
+        Raises
+        ------
+        DataError
+            The pair was not fitted.
+        """
         for tf in self.transfer_functions:
             if tf.output == output and tf.input == input:
                 return tf
@@ -95,7 +110,18 @@ class RationalFit:
         raise DataError(msg)
 
     def evaluate(self, freq: ArrayLike) -> CArray:
-        """Fitted FRFs ``H[out, in, freq]`` at ``freq`` (Hz)."""
+        """Fitted FRFs ``H[out, in, freq]`` at ``freq`` (Hz).
+
+        Parameters
+        ----------
+        freq : array_like, shape (n_freq,)
+            Frequencies in Hz.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_out, n_in, n_freq)
+            In the units of the fitted FRFs.
+        """
         f = np.atleast_1d(np.asarray(freq, dtype=float))
         s = 2j * np.pi * f
         out = np.empty((len(self.output_names), len(self.input_names), f.size), dtype=complex)

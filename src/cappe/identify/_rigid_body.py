@@ -483,21 +483,59 @@ class RigidBodyMotion:
         return int(self.time.size)
 
     def index(self, body: str) -> int:
-        """Row of a body; unknown names raise a DataError listing the known ones."""
+        """Row of a body; unknown names raise a DataError listing the known ones.
+
+        Parameters
+        ----------
+        body : str
+            Body name.
+
+        Returns
+        -------
+        int
+            Index into ``bodies`` and the first axis of the motion arrays.
+        """
         if body not in self.bodies:
             msg = f"unknown body {body!r}; the motion has {list(self.bodies)}"
             raise DataError(msg)
         return self.bodies.index(body)
 
     def get(self, body: str, quantity: Quantity = "displacement") -> Array:
-        """Motion of one body, shape (n_t, 6), columns :data:`RIGID_BODY_DOFS`."""
+        """Motion of one body, shape (n_t, 6), columns :data:`RIGID_BODY_DOFS`.
+
+        Parameters
+        ----------
+        body : str
+            Body name.
+        quantity : {"displacement", "velocity", "acceleration"}
+            Which motion: m and rad, m/s and rad/s, or m/s^2 and rad/s^2.
+
+        Returns
+        -------
+        ndarray, shape (n_t, 6)
+        """
         if quantity not in _QUANTITIES:
             msg = f"quantity must be one of {', '.join(_QUANTITIES)}; got {quantity!r}"
             raise DataError(msg)
         return np.asarray(getattr(self, quantity)[self.index(body)])
 
     def point_motion(self, body: str, points: ArrayLike, quantity: Quantity = "displacement") -> Array:
-        """Motion ``u + theta x (r - r0)`` of body points (k, 3) in m: shape (n_t, k, 3)."""
+        """Motion ``u + theta x (r - r0)`` of body points (k, 3) in m: shape (n_t, k, 3).
+
+        Parameters
+        ----------
+        body : str
+            Body name.
+        points : array_like, shape (k, 3)
+            Points of the body in global coordinates (m).
+        quantity : {"displacement", "velocity", "acceleration"}
+            Which motion (m, m/s or m/s^2).
+
+        Returns
+        -------
+        ndarray, shape (n_t, k, 3)
+            Translation of each point along x, y, z (small rotations).
+        """
         q = self.get(body, quantity)
         rel = _vectors("points", points) - self.reference[self.index(body)]
         return np.asarray(q[:, None, :3] + np.cross(q[:, None, 3:], rel[None, :, :]))
@@ -583,6 +621,20 @@ def body_geometry(
 
     Points are global coordinates at the given parameter values and axis position, the frame in which
     :func:`model_rigid_body_motion` and model-based :func:`reconstruct_rigid_body_motion` report motion.
+
+    Parameters
+    ----------
+    model : NumericModel
+        The model.
+    params : mapping name -> float or ndarray, optional
+        Parameter values (SI); default the model's.
+    position : mapping axis -> float, optional
+        Axis position (m or rad); default the model's.
+
+    Returns
+    -------
+    dict
+        ``{body name: BodyGeometry}`` (points in m).
 
     Examples
     --------

@@ -134,6 +134,31 @@ def square(
     ``duty`` is the fraction of each period at ``+amplitude``. Its harmonics above fs/2 alias; keep ``freq`` well
     below the Nyquist frequency.
 
+    Parameters
+    ----------
+    freq : float
+        Frequency in Hz, 0 < freq < fs/2.
+    amplitude : float
+        Level in ``unit``.
+    fs : float
+        Sampling rate in Hz.
+    duration : float
+        Record length in s (``round(duration * fs)`` samples).
+    duty : float
+        Fraction of each period at ``+amplitude``, in [0, 1].
+    name, unit : str
+        Channel name and unit.
+
+    Returns
+    -------
+    TimeData
+
+    Raises
+    ------
+    DataError
+        If a number is not finite, ``fs``/``duration`` are not positive, ``freq`` is not in (0, fs/2) or ``duty``
+        not in [0, 1].
+
     Examples
     --------
     >>> force = square(freq=10.0, amplitude=2.0, fs=1000.0, duration=0.1, duty=0.25)
@@ -167,6 +192,25 @@ def chirp(
 
     The instantaneous frequency is ``f0 + (f1 - f0) t / T`` (``"linear"``) or ``f0 (f1 / f0)**(t / T)``
     (``"logarithmic"``, equal time per octave; needs f0, f1 > 0), T = ``duration``. Built on :func:`scipy.signal.chirp`.
+
+    Parameters
+    ----------
+    f0, f1 : float
+        Start and end frequency in Hz, in [0, fs/2) (> 0 for ``"logarithmic"``).
+    fs : float
+        Sampling rate in Hz.
+    duration : float
+        Record length in s.
+    amplitude : float
+        Peak value in ``unit``.
+    method : {"linear", "logarithmic"}
+        The sweep law.
+    name, unit : str
+        Channel name and unit.
+
+    Returns
+    -------
+    TimeData
 
     Examples
     --------
@@ -316,6 +360,25 @@ def stepped_sine(
     ``tau`` restarts at 0 with every step, so every step starts at zero force. The same arguments give the
     :func:`stepped_sine_schedule` that :func:`~cappe.identify._frf.stepped_sine_frf` needs.
 
+    Parameters
+    ----------
+    freqs : array_like, shape (n_steps,)
+        Step frequencies in Hz, each in (0, fs/2).
+    amplitude : float
+        Peak value in ``unit``.
+    fs : float
+        Sampling rate in Hz.
+    dwell : float
+        Time per step in s.
+    settle : float, optional
+        Settling time at the start of each step in s (see :func:`stepped_sine_schedule`).
+    name, unit : str
+        Channel name and unit.
+
+    Returns
+    -------
+    TimeData
+
     Examples
     --------
     >>> force = stepped_sine(freqs=[10.0, 20.0, 40.0], amplitude=5.0, fs=1000.0, dwell=0.5)
@@ -370,6 +433,8 @@ def random_noise(
         Number of identical periods (``periodic=True`` only).
     rng : int, numpy.random.Generator or None
         Seed or generator; the same seed gives the same signal.
+    name, unit : str
+        Channel name and unit.
 
     Raises
     ------
@@ -463,6 +528,8 @@ def prbs(
     rng : int, numpy.random.Generator or None
         None starts the register at all ones (scipy's default, a fixed sequence); a seed or generator draws a
         random non-zero start state, i.e. a random circular shift of the same sequence.
+    name, unit : str
+        Channel name and unit.
 
     Examples
     --------
@@ -524,6 +591,29 @@ def impact(
 
     ``double_hit=(delay, ratio)`` adds a second pulse ``delay`` s after the first with ``ratio * amplitude`` peak,
     as when the hammer bounces.
+
+    Parameters
+    ----------
+    fs : float
+        Sampling rate in Hz.
+    duration : float
+        Record length in s.
+    amplitude : float
+        Peak force in ``unit``.
+    contact_time : float
+        Pulse length in s (at least 2 samples).
+    at : float
+        Start of the pulse in s.
+    shape : {"half-sine", "haversine"}
+        Pulse shape.
+    double_hit : (float, float), optional
+        ``(delay in s >= contact_time, amplitude ratio > 0)`` of a second pulse.
+    name, unit : str
+        Channel name and unit.
+
+    Returns
+    -------
+    TimeData
 
     Raises
     ------
