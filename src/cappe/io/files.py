@@ -43,6 +43,16 @@ _MAX_INT_DIGITS = 4300
 def read_parameters(path: str | Path) -> dict[str, float]:
     """Read a parameter file ``{"name": value, ...}`` (SI). Names are checked later against the model.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    dict
+        ``{name: float}`` in SI units.
+
     Raises
     ------
     DataError
@@ -271,7 +281,20 @@ def atomic_path(path: str | Path, suffix: str = ".tmp") -> Iterator[Path]:
 
 
 def write_text(path: str | Path, text: str) -> Path:
-    """Write text atomically (see :func:`atomic_path`)."""
+    """Write text atomically (see :func:`atomic_path`).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write (replaced only once the text is complete).
+    text : str
+        The content, written as UTF-8.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     with atomic_path(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
     return Path(path)
@@ -284,5 +307,18 @@ def _umask() -> int:
 
 
 def write_json(path: str | Path, data: Any) -> Path:
-    """Write JSON atomically (indent 2)."""
+    """Write JSON atomically (indent 2).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    data : object
+        A JSON-serializable value (dicts, lists, str, numbers, bool, None).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     return write_text(path, json.dumps(data, indent=2) + "\n")

@@ -165,6 +165,22 @@ def read_time_data(path: str | Path, *, format: str | None = None) -> TimeData: 
     Errors name the file and the place: a missing file, an empty file, a non-numeric CSV cell (line and column),
     a missing npz array, non-uniform time stamps (TimeData's rules).
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+    format : {None, "uff", "uff-binary", "csv", "npz"}
+        File format; None takes it from the extension (.uff/.unv, .csv, .npz).
+
+    Returns
+    -------
+    TimeData
+
+    Raises
+    ------
+    DataError
+        The file cannot be read or does not hold valid time data.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -185,6 +201,20 @@ def read_time_data(path: str | Path, *, format: str | None = None) -> TimeData: 
 
 def write_frf(path: str | Path, frf: FRFData, *, format: str | None = None) -> Path:  # noqa: A002
     """Write FRFs (with coherence and window decay when set) as UFF 58, CSV or npz, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    frf : FRFData
+        The FRFs (finite, increasing lines).
+    format : {None, "uff", "uff-binary", "csv", "npz"}
+        File format; None takes it from the extension (.uff/.unv, .csv, .npz).
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Examples
     --------
@@ -238,6 +268,22 @@ def write_frf(path: str | Path, frf: FRFData, *, format: str | None = None) -> P
 def read_frf(path: str | Path, *, format: str | None = None) -> FRFData:  # noqa: A002
     """Read FRFs from UFF 58 (function type 4, coherence 6/26), CSV or npz (format from the extension).
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+    format : {None, "uff", "uff-binary", "csv", "npz"}
+        File format; None takes it from the extension (.uff/.unv, .csv, .npz).
+
+    Returns
+    -------
+    FRFData
+
+    Raises
+    ------
+    DataError
+        The file cannot be read or does not hold valid FRFs.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -262,6 +308,17 @@ def read_measurements(path: str | Path, *, format: str | None = None) -> TimeDat
 
     UFF: function type 1 datasets give time data, function type 4 FRFs (a file with both is ambiguous);
     CSV: a first header column ``time`` or ``frequency``; npz: the ``time``/``values`` or ``freq``/``H`` arrays.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+    format : {None, "uff", "uff-binary", "csv", "npz"}
+        File format; None takes it from the extension (.uff/.unv, .csv, .npz).
+
+    Returns
+    -------
+    TimeData or FRFData
 
     Examples
     --------

@@ -67,7 +67,24 @@ def _required(raw: Mapping[str, Any], key: str, entry: str, source: str) -> Any:
 
 
 def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalData:
-    """Validate a parsed ``cappe.modal/1`` document; every error names ``source`` and the entry."""
+    """Validate a parsed ``cappe.modal/1`` document; every error names ``source`` and the entry.
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed document (``format``, ``sensors``, ``sets`` with frequencies in Hz, damping ratios and shapes).
+    source : str
+        Where it came from (a file name), for messages.
+
+    Returns
+    -------
+    ModalData
+
+    Raises
+    ------
+    DataError
+        The document breaks a rule of the format.
+    """
     if not isinstance(data, Mapping) or data.get("format") != MODAL_FORMAT:
         got = data.get("format") if isinstance(data, Mapping) else type(data).__name__
         msg = f"modal data must have \"format\": \"{MODAL_FORMAT}\"; got {shown(got)} {_where(source, 'format')}"
@@ -125,6 +142,15 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
 def read_modal_data(path: str | Path) -> ModalData:
     """Read and validate a ``cappe.modal/1`` JSON file.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    ModalData
+
     Raises
     ------
     DataError
@@ -136,5 +162,13 @@ def read_modal_data(path: str | Path) -> ModalData:
 
 
 def write_modal_data(path: str | Path, data: ModalData) -> None:
-    """Write modal data atomically as ``cappe.modal/1`` JSON."""
+    """Write modal data atomically as ``cappe.modal/1`` JSON.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    data : ModalData
+        The modes.
+    """
     write_json(path, data.to_dict())

@@ -514,6 +514,15 @@ def read_uff_time_data(path: str | Path) -> TimeData:
     ``" (dataset k)"`` suffix. Their units come from the ordinate axis-units label (empty when ``NONE``).
     All channels must share one time axis. Other datasets in the file are ignored.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    TimeData
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -605,6 +614,20 @@ def write_uff_frf(path: str | Path, frf: FRFData, *, binary: bool = False) -> Pa
     output quantities are kept in ID line 3; the quantity also sets the ordinate data type (8 displacement,
     11 velocity, 12 acceleration) that modal software such as sdypy-EMA uses to pick the FRF form.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    frf : FRFData
+        The FRFs.
+    binary : bool
+        Binary UFF 58b instead of ASCII.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -681,6 +704,15 @@ def read_uff_frf(path: str | Path) -> FRFData:
     ordinate data type (all known or none), and the window decay is unknown (None). The datasets must form a
     complete output x input grid on one frequency axis; coherence, when present, must cover every pair.
     Other datasets in the file are ignored.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    FRFData
 
     Examples
     --------
@@ -884,6 +916,20 @@ def write_uff_nodes(
     Integer keys are node numbers. String keys are node names: each gets a UFF 2467 group ``"node <name>"`` so
     that :func:`read_uff_nodes` returns the same keys; a name that is a positive integer keeps that number.
 
+    Parameters
+    ----------
+    path : str or Path
+        The file to write.
+    coords : mapping name or number -> (x, y, z)
+        Node coordinates in m.
+    dataset : {2411, 15}
+        UFF dataset type.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
     Examples
     --------
     >>> import pathlib, tempfile
@@ -938,6 +984,16 @@ def read_uff_nodes(path: str | Path) -> dict[str | int, tuple[float, float, floa
 
     Nodes named by cappe's UFF 2467 groups come back under their names (str), other nodes under their
     numbers (int).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    dict
+        ``{name or number: (x, y, z)}`` in m.
 
     Examples
     --------
@@ -1154,6 +1210,15 @@ def read_uff_modal(path: str | Path) -> ModalData:
     with damping ``-Re(lambda) / |lambda|``, or the frequency and viscous damping ratio of normal modes; sensors
     are ``"node:x"`` ... (named nodes from cappe's groups keep their names), leaving out directions that are zero
     in every mode. All modes must list the same nodes. Node coordinates: :func:`read_uff_nodes`.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to read.
+
+    Returns
+    -------
+    ModalData
 
     Examples
     --------

@@ -20,7 +20,22 @@ def builtin_names() -> list[str]:
 
 
 def builtin_path(name: str) -> Path:
-    """Path of the YAML file of built-in model ``name``."""
+    """Path of the YAML file of built-in model ``name``.
+
+    Parameters
+    ----------
+    name : str
+        A built-in model name (``"two-mass-rig"``, ...; :func:`builtin_names` lists them).
+
+    Returns
+    -------
+    Path
+
+    Raises
+    ------
+    ModelError
+        No built-in model has that name.
+    """
     path = _folder() / f"{name}.yaml"
     if not path.is_file():
         msg = f"unknown built-in model {name!r}; available: {', '.join(builtin_names())}"
