@@ -58,6 +58,8 @@ class ModalBatch:
         Exact complex mode shapes at the sensors, scaled so that ``phi^T M psi = 1`` with the real mode.
     full_shapes : ndarray, shape (B, n_dof, n_modes), optional
         Mass-normalized real shapes at all DOFs.
+    dofs : tuple of str
+        Names of the DOFs (rows of ``full_shapes``).
     """
 
     frequency: Array
@@ -109,7 +111,18 @@ class ModalBatch:
         return names, out
 
     def modal_set(self, sample: int = 0) -> ModalSet:
-        """The modes of one sample as a :class:`ModalSet` (shapes at the sensors)."""
+        """The modes of one sample as a :class:`ModalSet` (shapes at the sensors).
+
+        Parameters
+        ----------
+        sample : int
+            Row of the batch.
+
+        Returns
+        -------
+        ModalSet
+            Exact modes when they were computed, else the real (first-order) ones.
+        """
         if self.poles is not None and self.complex_shapes is not None:
             poles = self.poles[sample]
             freq = np.abs(poles) / (2 * np.pi)
@@ -123,6 +136,16 @@ class ModalBatch:
         """One sample's modes as a :class:`cappe.systems.ModalDataSet` (exact modes when computed).
 
         Modes without an exact oscillatory counterpart (rigid-body or overdamped) are left out.
+
+        Parameters
+        ----------
+        sample : int
+            Row of the batch.
+
+        Returns
+        -------
+        ModalDataSet
+            Frequencies in Hz, damping ratios and shapes at the sensors, at the batch's position.
         """
         if self.poles is not None and self.complex_shapes is not None:
             poles = self.poles[sample]

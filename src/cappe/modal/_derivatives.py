@@ -254,6 +254,23 @@ def modal_derivatives(
 ) -> ModalDerivatives:
     """Analytic derivatives of frequencies, damping ratios and shapes (function form).
 
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model.
+    params : array (n_params,), mapping or None
+        One parameter vector (SI; a mapping overrides the nominal values).
+    position : mapping or None
+        Axis position in m or rad.
+    sensors : sequence of str, "dofs" or None
+        Channels of the shapes, as for :class:`ModalEngine`.
+    n_modes : int or None
+        Number of modes (lowest first); None: all.
+
+    Returns
+    -------
+    ModalDerivatives
+
     Examples
     --------
     >>> from cappe.model import load_model

@@ -143,6 +143,18 @@ class ModalEngine:
     def sensor_rows(self, position: Mapping[str, float] | None = None) -> tuple[tuple[str, ...], Array]:
         """The engine's sensor channels at ``position``: labels and the rows (n_s, n_dof) mapping DOFs to them.
 
+        Parameters
+        ----------
+        position : mapping or None
+            Axis position in m or rad (sensor rows of bodies that move with an axis depend on it).
+
+        Returns
+        -------
+        labels : tuple of str
+            The channels.
+        rows : ndarray, shape (n_s, n_dof)
+            Channel motion per DOF (dimensionless for translations; m per rad for rotations).
+
         Examples
         --------
         >>> from cappe.model import load_model
@@ -206,6 +218,24 @@ class ModalEngine:
 
         With ``previous`` (the reference of a neighbouring position), the modes are ordered to follow it,
         so that reference mode r is the same physical mode at every position.
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI; default nominal).
+        position : mapping or None
+            Axis position in m or rad.
+        previous : ModeReference, optional
+            Reference at a neighbouring position to follow.
+
+        Returns
+        -------
+        ModeReference
+
+        Raises
+        ------
+        ModelError
+            ``params`` is a batch.
         """
         p = self.model.vector(params)
         if p.ndim != 1:
@@ -224,7 +254,19 @@ class ModalEngine:
     def references(
         self, positions: Sequence[Mapping[str, float]], params: ParamsLike = None
     ) -> list[ModeReference]:
-        """Reference modes at several positions, each tracked to the previous one."""
+        """Reference modes at several positions, each tracked to the previous one.
+
+        Parameters
+        ----------
+        positions : sequence of mapping
+            Axis positions in m or rad, in the order to track along.
+        params : array (n_params,), mapping or None
+            One parameter vector (SI; default nominal).
+
+        Returns
+        -------
+        list of ModeReference
+        """
         out: list[ModeReference] = []
         for position in positions:
             out.append(self.reference(params, position, previous=out[-1] if out else None))
@@ -241,6 +283,20 @@ class ModalEngine:
 
         Modes are tracked from position to position, so column r is the same physical mode at each; with
         ``exact`` the poles and complex shapes include all damping and gyroscopic terms.
+
+        Parameters
+        ----------
+        positions : sequence of mapping, optional
+            Axis positions in m or rad (default: the model's default position).
+        params : array (n_params,), mapping or None
+            One parameter vector (SI; default nominal).
+        exact : bool
+            Exact complex modes (else first-order damping and real shapes).
+
+        Returns
+        -------
+        ModalData
+            One set per position, at the engine's sensor channels.
 
         Examples
         --------
@@ -271,6 +327,21 @@ class ModalEngine:
 
         Returns a :class:`cappe.modal.ModalDerivatives`, with respect to ``parameters`` (default all; naming
         only the ones needed saves most of the work on models with many parameters).
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI; default nominal).
+        position : mapping or None
+            Axis position in m or rad.
+        track : ModeReference or bool
+            Order the modes like a reference (``True``: the nominal modes at this position).
+        parameters : sequence of str, optional
+            Parameters to differentiate by (default all).
+
+        Returns
+        -------
+        ModalDerivatives
         """
         from cappe.modal._derivatives import derivatives
 
@@ -333,7 +404,24 @@ class ModalEngine:
         contributions: bool = False,
         progress: bool = False,
     ) -> list[T]:
-        """Apply ``func`` to the modes of each chunk and return its results in order (memory stays bounded)."""
+        """Apply ``func`` to the modes of each chunk and return its results in order (memory stays bounded).
+
+        Parameters
+        ----------
+        func : callable
+            ``func(batch)`` -> T for the :class:`ModalBatch` of one chunk of parameter vectors.
+        params : array (n_params,) or (B, n_params), mapping or None
+            Parameter vectors (SI) in ``model.parameter_names`` order.
+        position : mapping or None
+            Axis position in m or rad.
+        track, exact, contributions, progress
+            As for :meth:`evaluate`.
+
+        Returns
+        -------
+        list
+            ``func``'s results, one per chunk, in order.
+        """
         p = self.model.vector(params)
         pb = p if p.ndim == 2 else p[None, :]
         reference = self._reference_for(track, position)
@@ -558,6 +646,25 @@ def modal_batch(
     track: ModeReference | bool = False,
 ) -> ModalBatch:
     """Modes of ``model`` for a batch of parameter vectors (function form of :meth:`ModalEngine.evaluate`).
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model.
+    params : array (n_params,) or (B, n_params), mapping or None
+        Parameter vectors (SI) in ``model.parameter_names`` order (a mapping overrides the nominal values).
+    position : mapping or None
+        Axis position in m or rad (default: each axis at its first position).
+    sensors : sequence of str, "dofs" or None
+        Channels of the shapes, as for :class:`ModalEngine`.
+    n_modes : int or None
+        Number of modes (lowest first); None: all.
+    exact, contributions, track
+        As for :meth:`ModalEngine.evaluate`.
+
+    Returns
+    -------
+    ModalBatch
 
     Examples
     --------

@@ -72,6 +72,16 @@ def axis_positions(model: NumericModel | Structure) -> list[dict[str, float]]:
 
     An axis that lists no positions stays at 0.
 
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model.
+
+    Returns
+    -------
+    list of dict
+        ``{axis: value}`` (m or rad) for every combination.
+
     Examples
     --------
     >>> from cappe.model import load_model
@@ -235,6 +245,25 @@ def sensor_coordinates(
 
     A sensor's point is given in its body's frame relative to the body's origin, whose nominal global position may
     depend on the axes; the sum is the node's location in the global frame.
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model.
+    params : array (n_params,), mapping or None
+        One parameter vector (SI; default nominal).
+    position : mapping or None
+        Axis position in m or rad.
+
+    Returns
+    -------
+    dict
+        ``{sensor name: (x, y, z)}`` in m.
+
+    Raises
+    ------
+    DataError
+        ``params`` is a batch.
 
     Examples
     --------
