@@ -92,6 +92,23 @@ class BearingState:
 
     ``axial_stiffness`` and ``radial_stiffness`` are those of one bearing (N/m); ``ball_load`` is ``Q`` (N),
     ``contact_deflection`` ``delta_n`` (m), ``axial_deflection`` the inner ring's axial displacement (m).
+
+    Attributes
+    ----------
+    axial_load : float
+        Axial (pre)load of the bearing in N.
+    contact_angle : float
+        Loaded contact angle in rad.
+    ball_load : float
+        Normal load ``Q`` of one ball in N.
+    contact_deflection : float
+        Normal approach ``delta_n`` of the raceways at one ball in m.
+    axial_deflection : float
+        Axial displacement of the inner ring from the unloaded contact in m.
+    contact_stiffness : float
+        ``dQ / d delta_n`` of one ball in N/m.
+    axial_stiffness, radial_stiffness : float
+        Axial and radial stiffness of the bearing in N/m.
     """
 
     axial_load: float
@@ -168,7 +185,18 @@ class AngularContactBearing:
         return (inner_sum, inner_diff), (outer_sum, outer_diff)
 
     def contact_constant(self, alpha: float | None = None) -> float:
-        """``K_n`` of ``Q = K_n delta_n^(3/2)`` for one ball between both raceways (N/m^1.5) at ``alpha``."""
+        """``K_n`` of ``Q = K_n delta_n^(3/2)`` for one ball between both raceways (N/m^1.5) at ``alpha``.
+
+        Parameters
+        ----------
+        alpha : float, optional
+            Contact angle in rad (default the unloaded one).
+
+        Returns
+        -------
+        float
+            In N/m^1.5.
+        """
         angle = self.contact_angle if alpha is None else float(alpha)
         (si, fi), (so, fo) = self._contacts(angle)
         k_in = contact_constant(si, fi, self.youngs_modulus, self.poisson)
@@ -176,7 +204,22 @@ class AngularContactBearing:
         return float((k_in ** (-2 / 3) + k_out ** (-2 / 3)) ** (-1.5))
 
     def state(self, axial_load: float) -> BearingState:
-        """The bearing under the axial (pre)load ``axial_load`` (N), shared by all balls."""
+        """The bearing under the axial (pre)load ``axial_load`` (N), shared by all balls.
+
+        Parameters
+        ----------
+        axial_load : float
+            Axial load in N, > 0.
+
+        Returns
+        -------
+        BearingState
+
+        Raises
+        ------
+        ModelError
+            ``axial_load`` is not a positive finite number.
+        """
         fa = float(axial_load)
         if not (math.isfinite(fa) and fa > 0):
             msg = f"axial load must be a positive number of newtons; got {axial_load!r}"
@@ -212,7 +255,19 @@ class AngularContactBearing:
         )
 
     def stiffness_curve(self, axial_loads: np.ndarray) -> dict[str, np.ndarray]:
-        """Axial and radial stiffness of one bearing and its contact angle over axial loads (N)."""
+        """Axial and radial stiffness of one bearing and its contact angle over axial loads (N).
+
+        Parameters
+        ----------
+        axial_loads : array_like, shape (n,)
+            Axial loads in N, > 0.
+
+        Returns
+        -------
+        dict
+            ``axial_load`` (N), ``contact_angle`` (rad), ``axial_stiffness`` and ``radial_stiffness`` (N/m), each an
+            ndarray of shape (n,).
+        """
         states = [self.state(float(f)) for f in np.atleast_1d(axial_loads)]
         return {
             "axial_load": np.array([s.axial_load for s in states]),

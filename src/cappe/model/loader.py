@@ -82,6 +82,15 @@ _ORDER = ("parameters", "axes", "bodies", "elements", "sensors", "inputs", "outp
 def load_model(source: str | Path) -> Structure:
     """Load a model from a YAML file path or a built-in name ``builtin:NAME``.
 
+    Parameters
+    ----------
+    source : str or Path
+        A ``cappe.model/1`` YAML file or ``"builtin:NAME"`` (:func:`cappe.library.builtin_names`).
+
+    Returns
+    -------
+    Structure
+
     Raises
     ------
     ModelError
@@ -152,7 +161,24 @@ def _parse_for_message(text: str, label: str) -> Any:
 
 
 def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") -> Structure:
-    """Build a Structure from the parsed content of a model file."""
+    """Build a Structure from the parsed content of a model file.
+
+    Parameters
+    ----------
+    data : mapping
+        The parsed ``cappe.model/1`` document.
+    label : str
+        Where it came from (a file name), for messages.
+
+    Returns
+    -------
+    Structure
+
+    Raises
+    ------
+    ModelError
+        The document breaks a rule of the format; the message names ``label`` and the entry.
+    """
     fmt = data.get("format", FORMAT)
     if fmt != FORMAT:
         msg = f"{label}: unsupported model format {fmt!r}; expected {FORMAT!r}"

@@ -41,12 +41,27 @@ class Term:
 
 
 def derive(structure: Structure) -> SymbolicModel:
-    """Derive the exact symbolic model of ``structure`` (same as ``SymbolicModel(structure)``)."""
+    """Derive the exact symbolic model of ``structure`` (same as ``SymbolicModel(structure)``).
+
+    Parameters
+    ----------
+    structure : Structure
+        The model description.
+
+    Returns
+    -------
+    SymbolicModel
+    """
     return SymbolicModel(structure)
 
 
 class SymbolicModel:
     """Exact symbolic equations of motion of a Structure.
+
+    Parameters
+    ----------
+    structure : Structure
+        The model description; its parameters and axis coordinates become sympy symbols.
 
     Examples
     --------
@@ -79,7 +94,20 @@ class SymbolicModel:
         return {DIRECTIONS.index(d): start + k for k, d in enumerate(b.dofs)}
 
     def point_rows(self, body: str, point: Sequence[sp.Expr]) -> list[SparseRow]:
-        """Three sparse rows mapping q to the (x, y, z) displacement of a body point."""
+        """Three sparse rows mapping q to the (x, y, z) displacement of a body point.
+
+        Parameters
+        ----------
+        body : str
+            Body name (``"ground"``: no DOFs, empty rows).
+        point : sequence of 3 sympy expressions
+            The point relative to the body's origin, in m.
+
+        Returns
+        -------
+        list of dict
+            One sparse row ``{DOF index: sympy expression}`` per component.
+        """
         cols = self._columns(body)
         jac = point_jacobian(point)
         rows: list[SparseRow] = []
@@ -89,12 +117,36 @@ class SymbolicModel:
         return rows
 
     def rotation_rows(self, body: str) -> list[SparseRow]:
-        """Three sparse rows mapping q to the small rotation (rx, ry, rz) of a body."""
+        """Three sparse rows mapping q to the small rotation (rx, ry, rz) of a body.
+
+        Parameters
+        ----------
+        body : str
+            Body name.
+
+        Returns
+        -------
+        list of dict
+            One sparse row ``{DOF index: sympy expression}`` per component.
+        """
         cols = self._columns(body)
         return [{cols[3 + a]: sp.Integer(1)} if 3 + a in cols else {} for a in range(3)]
 
     def elongation_row(self, element: str, direction: str) -> SparseRow:
-        """Sparse row h with elongation = h q for one local direction of an element."""
+        """Sparse row h with elongation = h q for one local direction of an element.
+
+        Parameters
+        ----------
+        element : str
+            Element name.
+        direction : {"x", "y", "z", "rx", "ry", "rz"}
+            Local direction of the element (translations in m, rotations in rad).
+
+        Returns
+        -------
+        dict
+            ``{DOF index: sympy expression}``.
+        """
         e = self.structure.element(element)
         k = DIRECTIONS.index(direction)
         axis = e.axes[:, k % 3]
@@ -109,7 +161,24 @@ class SymbolicModel:
     def direction_row(
         self, body: str, point: Sequence[sp.Expr], direction: Sequence[sp.Expr], rotation: bool = False
     ) -> SparseRow:
-        """Row mapping q to the motion of a body point along a unit direction (or rotation about it)."""
+        """Row mapping q to the motion of a body point along a unit direction (or rotation about it).
+
+        Parameters
+        ----------
+        body : str
+            Body name.
+        point : sequence of 3 sympy expressions
+            The point relative to the body's origin, in m (unused for a rotation).
+        direction : sequence of 3 sympy expressions
+            Unit direction in global coordinates.
+        rotation : bool
+            The rotation about ``direction`` instead of the translation along it.
+
+        Returns
+        -------
+        dict
+            ``{DOF index: sympy expression}``.
+        """
         rows = self.rotation_rows(body) if rotation else self.point_rows(body, point)
         return _combine([(direction[a], rows[a]) for a in range(3)])
 
@@ -204,19 +273,54 @@ class SymbolicModel:
 
     # -- inputs and outputs -----------------------------------------------------------------------
     def input_column(self, name: str) -> SparseRow:
-        """Generalized force per unit input (sparse column)."""
+        """Generalized force per unit input (sparse column).
+
+        Parameters
+        ----------
+        name : str
+            Input name (a force in N or a moment in N m).
+
+        Returns
+        -------
+        dict
+            ``{DOF index: sympy expression}``.
+        """
         inp = self.structure.input(name)
         return self.direction_row(inp.body, inp.point, inp.direction, rotation=inp.kind == "moment")
 
     def output_row(self, name: str) -> tuple[str, SparseRow]:
-        """(quantity, row) with the output's displacement-level value = row · q."""
+        """(quantity, row) with the output's displacement-level value = row · q.
+
+        Parameters
+        ----------
+        name : str
+            Output name.
+
+        Returns
+        -------
+        quantity : str
+            ``"displacement"``, ``"velocity"``, ``"acceleration"`` or ``"elongation"``.
+        row : dict
+            ``{DOF index: sympy expression}``.
+        """
         out: Output = self.structure.output(name)
         if out.quantity == "elongation":
             return out.quantity, self.elongation_row(out.element, out.element_direction)
         return out.quantity, self.direction_row(out.body, out.point, out.direction, rotation=out.rotation)
 
     def sensor_rows(self, name: str) -> list[SparseRow]:
-        """Rows for the x, y, z displacement of a sensor node (derived once per sensor; a fresh list each call)."""
+        """Rows for the x, y, z displacement of a sensor node (derived once per sensor; a fresh list each call).
+
+        Parameters
+        ----------
+        name : str
+            Sensor name.
+
+        Returns
+        -------
+        list of dict
+            One sparse row ``{DOF index: sympy expression}`` per component.
+        """
         rows = self._sensor_rows.get(name)
         if rows is None:
             s = self.structure.sensor(name)
@@ -225,6 +329,17 @@ class SymbolicModel:
         return [dict(row) for row in rows]
 
     def input_matrix(self, inputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
+        """Generalized forces per unit input, one column per input.
+
+        Parameters
+        ----------
+        inputs : iterable of str, optional
+            Input names (default all, in model order).
+
+        Returns
+        -------
+        sympy.ImmutableMatrix, shape (n_dof, n_in)
+        """
         names = list(inputs) if inputs is not None else [i.name for i in self.structure.inputs]
         cols = [_dense_row(self.input_column(n), self.n_dof) for n in names]
         return (
@@ -234,14 +349,36 @@ class SymbolicModel:
         )
 
     def output_matrix(self, outputs: Iterable[str] | None = None) -> sp.ImmutableMatrix:
-        """Displacement-level output rows (the quantity of each output says how to differentiate)."""
+        """Displacement-level output rows (the quantity of each output says how to differentiate).
+
+        Parameters
+        ----------
+        outputs : iterable of str, optional
+            Output names (default all, in model order).
+
+        Returns
+        -------
+        sympy.ImmutableMatrix, shape (n_out, n_dof)
+        """
         names = list(outputs) if outputs is not None else [o.name for o in self.structure.outputs]
         rows = [_dense_row(self.output_row(n)[1], self.n_dof) for n in names]
         return sp.ImmutableMatrix(sp.Matrix.vstack(*rows)) if rows else sp.ImmutableMatrix(sp.zeros(0, self.n_dof))
 
     # -- substitution -----------------------------------------------------------------------------
     def substitute(self, values: Mapping[str, object]) -> dict[str, sp.ImmutableMatrix]:
-        """Matrices with the given parameter / axis values substituted (others stay symbolic)."""
+        """Matrices with the given parameter / axis values substituted (others stay symbolic).
+
+        Parameters
+        ----------
+        values : mapping name -> number or expression
+            Parameter values (SI) and axis coordinates (m or rad) by name.
+
+        Returns
+        -------
+        dict
+            ``{"M", "C", "K", "G", "H": sympy.ImmutableMatrix}`` (mass, viscous damping, stiffness, gyroscopic,
+            hysteretic), each (n_dof, n_dof).
+        """
         subs = {symbol(k): sp.sympify(v) for k, v in values.items()}
         return {k: sp.ImmutableMatrix(m.xreplace(subs)) for k, m in self.matrices().items()}
 
