@@ -45,6 +45,12 @@ The pipeline (paper Fig. 1), for reference modes at several axis positions, one 
    FRAC, CSF, MACXP, NDD statistics (paper Tables 2-5); and the permuted-damping comparison (Fig. 7): the
    identified damping unknowns' factors from their start (preliminary) values, reassigned to other damping
    unknowns at random, give models whose validation criteria show what the damping identification is worth.
+
+Where the code is: this module holds the estimator (its settings, their checks and the reference's);
+``_automated_steps`` the steps, each a function that returns a typed result of ``_automated_result``
+(:class:`GSAStage`, :class:`StiffnessSearch`, :class:`StiffnessRefinement`, :class:`DampingLeastSquares`,
+:class:`JointRefinement`, :class:`IdentificationValidation`, together :class:`AutomatedResult`); the maths of
+stages 2 and 3 is in ``_subproblems`` and ``_damping_least_squares``, the exact-mode residuals in ``_exact_modal``.
 """
 
 from __future__ import annotations
@@ -107,9 +113,9 @@ class AutomatedIdentification(Estimator):
         (each unknown's median over the subproblems that determine it) and the selections by 2nd, 3rd ... least
         spread; the lowest final cost wins. A single start can be trapped where modes cross between positions.
     truth : mapping, optional
-        True parameters of a simulated reference: validation FRFs then come from the model at the truth.
+        True parameters of a simulated reference: the validation step's FRFs then come from the model at the truth.
     n_permutations : int
-        Random reassignments of the damping factors in the permuted-damping comparison (0: none).
+        Random reassignments of the damping factors in the validation step's permuted-damping comparison (0: none).
     exact : bool
         Final joint refinement on the model's exact complex modes (default; right for measured modes and for
         references simulated with exact modes) rather than first-order ones (right for first-order references).
@@ -118,7 +124,8 @@ class AutomatedIdentification(Estimator):
         ``(0.005, 0.05, 0.02)``): the final refinement then weights its residuals by their noise (see
         :class:`ExactModalProblem`), which makes its 95 % intervals meaningful. Needs ``exact``.
     overlay : (str, str), optional
-        Output and input channel of the FRF kept for overlays (default: the driving point with the largest peak).
+        Output and input channel of the FRF the validation step keeps for overlays (default: the driving point with
+        the largest peak).
     n_workers : int, optional
         Threads for the GSA and the subproblems (default one per core).
     executor : Executor, str or None
@@ -288,7 +295,7 @@ class AutomatedIdentification(Estimator):
         ident, held = self._check(model, space, data)
         runner = Executor.coerce(self.executor, self.n_workers)
         # the known parameters' values: the GSA evaluates the model at its nominal vector, so hand it (and the
-        # subproblems' engine, whose shared-mass reduction is that of the nominal M) a view whose nominal holds them
+        # subproblems' engine, whose shared-mass reduction is that of the nominal M) the model with them as nominal
         base_model = model if np.array_equal(space.base, model.nominal) else model.with_nominal(space.base)
         setup = Setup(self.method, model, base_model, space, data, tuple(ident), held, settings, runner,
                       self.n_workers, self.progress)
