@@ -13,7 +13,7 @@ from ._automated_result import (
     StiffnessRefinement,
     StiffnessSearch,
 )
-from ._base import CostFunction, Estimator, fit_least_squares
+from ._base import CostFunction, Estimator, Fitted, fit_least_squares, least_squares_fit
 from ._damping_least_squares import DampingLeastSquares, damping_least_squares
 from ._direct import DirectEstimator
 from ._exact_modal import ExactModalProblem
@@ -94,6 +94,8 @@ __all__ = [
     "simulate_data",
     "simulation_study",
     "fit_least_squares",
+    "Fitted",
+    "least_squares_fit",
     "jacobian_uncertainty",
     "read_estimate",
     "write_estimate",

@@ -25,7 +25,7 @@ from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CostFunction", "Estimator", "fit_least_squares"]
+__all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "least_squares_fit"]
 
 Array = NDArray[np.float64]
 Residuals = Callable[[Array], Array]
@@ -52,7 +52,8 @@ class CostFunction:
 
 @dataclass(frozen=True)
 class Fitted:
-    """What an estimator's ``_fit`` may return instead of a bare estimate: the estimate and the cost it minimized."""
+    """What an estimator's ``_fit`` may return instead of a bare estimate: the estimate and the cost it minimized
+    (:func:`least_squares_fit` makes one), kept by :meth:`Estimator.fit` as ``cost_function_``."""
 
     estimate: ParameterEstimate
     cost: CostFunction | None = None
@@ -313,8 +314,19 @@ def least_squares_fit(
     strategy: str | None = None,
     rng: RandomLike = None,
 ) -> Fitted:
-    """:func:`fit_least_squares` with the cost it minimized, for an estimator's ``_fit`` (no cost where every
-    start failed)."""
+    """:func:`fit_least_squares` with the cost it minimized: what an estimator's ``_fit`` returns so that
+    :meth:`Estimator.cost_slice` can slice that cost (``cost`` is None where every start failed).
+
+    Parameters are those of :func:`fit_least_squares`.
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> space = ParameterSpace.from_model(load_model("builtin:two-mass-rig"), ["k11", "k22"])
+    >>> fitted = least_squares_fit("demo", space, lambda p: np.array([p[0] / 1.38e6 - 1, p[1] / 0.24e6 - 1]))
+    >>> fitted.estimate.parameters == fitted.cost.space.mapping(fitted.cost.centre)
+    True
+    """
     lo, hi = space.internal_bounds()
     candidates = np.atleast_2d(space.start if starts is None else np.asarray(starts, dtype=float))
     global_diag: dict[str, Any] = {}
