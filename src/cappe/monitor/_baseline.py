@@ -94,11 +94,40 @@ class Baseline:
         return np.concatenate([[1.0], x, x**2])
 
     def expected(self, conditions: Mapping[str, float] | None = None) -> Array:
-        """Expected healthy log-factors at these operating conditions."""
+        """Expected healthy log-factors at these operating conditions.
+
+        Parameters
+        ----------
+        conditions : mapping name -> float, optional
+            The measurement's operating conditions (every one the baseline depends on, in its recorded unit).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            ``ln`` of each component's expected factor.
+
+        Raises
+        ------
+        DataError
+            A condition the baseline depends on is missing.
+        """
         return np.asarray(self._design(conditions) @ self.coefficients, dtype=float)
 
     def deviation(self, log_factor: ArrayLike, conditions: Mapping[str, float] | None = None) -> Array:
-        """Log-factors minus their healthy expectation."""
+        """Log-factors minus their healthy expectation.
+
+        Parameters
+        ----------
+        log_factor : array_like, shape (n,)
+            ``ln`` of the measured component factors.
+        conditions : mapping name -> float, optional
+            The measurement's operating conditions (every one the baseline depends on, in its recorded unit).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Deviations in ``ln`` units (0.01: about 1 % above the expectation).
+        """
         return np.asarray(log_factor, dtype=float) - self.expected(conditions)
 
     @property
@@ -143,6 +172,22 @@ class Baseline:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> Baseline:
+        """The baseline of a ``cappe.monitor-baseline/1`` document (the inverse of :meth:`to_dict`).
+
+        Parameters
+        ----------
+        data : mapping
+            The document.
+
+        Returns
+        -------
+        Baseline
+
+        Raises
+        ------
+        DataError
+            The format is not ``cappe.monitor-baseline/1`` or an entry is missing or malformed.
+        """
         if data.get("format") != BASELINE_FORMAT:
             msg = f"baseline format must be {BASELINE_FORMAT!r}; got {data.get('format')!r}"
             raise DataError(msg)

@@ -98,7 +98,23 @@ class Analysis:
 
 @dataclass(frozen=True)
 class Alarm:
-    """A raised alarm (steps 4-6)."""
+    """A raised alarm (steps 4-6).
+
+    Attributes
+    ----------
+    component : str
+        The diagnosed fault hypothesis (a component or a fault parameter such as ``preload``).
+    statistic : str
+        The chart that signalled, e.g. ``"cusum+"``.
+    value : float
+        Its statistic (dimensionless, in the chart's standard deviations).
+    severity : str
+        Grade of the diagnosed change (:data:`SEVERITY_GRADES`).
+    diagnosis : Diagnosis
+        The diagnosis behind the alarm.
+    message : str
+        The alarm text.
+    """
 
     component: str
     statistic: str
@@ -114,7 +130,21 @@ class Alarm:
 
 @dataclass(frozen=True)
 class IngestResult:
-    """What :func:`ingest` recorded for one measurement."""
+    """What :func:`ingest` recorded for one measurement.
+
+    Attributes
+    ----------
+    measurement_id : int
+        Id of the measurement in the history store.
+    analysis : Analysis
+        Its features and estimates.
+    deviation : ndarray, shape (n,), or None
+        Log-factor deviations from the baseline (None before a baseline exists).
+    alarms : tuple of Alarm
+        The alarms raised by this measurement.
+    active : dict
+        ``{fault: severity}`` of the faults active after it.
+    """
 
     measurement_id: int
     analysis: Analysis
@@ -165,7 +195,19 @@ class Monitor:
 
     # -- steps 1-3 -----------------------------------------------------------------------------------------
     def prepare(self, data: FRFData | TimeData, *, nperseg: int | None = None) -> FRFData:
-        """Pre-processing: time data to H1 FRFs of the configured channels; FRFs pass unchanged."""
+        """Pre-processing: time data to H1 FRFs of the configured channels; FRFs pass unchanged.
+
+        Parameters
+        ----------
+        data : FRFData or TimeData
+            One measurement (SI units).
+        nperseg : int, optional
+            Samples per Welch segment (default: :func:`cappe.identify.estimate_frf`'s).
+
+        Returns
+        -------
+        FRFData
+        """
         if isinstance(data, FRFData):
             return data
         from cappe.identify import estimate_frf
@@ -175,7 +217,18 @@ class Monitor:
                             nperseg=nperseg, band=(0.0, min(hi * 1.2, data.fs / 2)))
 
     def expected_modes(self, log_factor: Array) -> Array:
-        """Natural frequencies (Hz) of the monitored modes of the model at these component factors."""
+        """Natural frequencies (Hz) of the monitored modes of the model at these component factors.
+
+        Parameters
+        ----------
+        log_factor : ndarray, shape (n,)
+            ``ln`` of each component's stiffness factor.
+
+        Returns
+        -------
+        ndarray, shape (n_monitored_modes,)
+            In Hz.
+        """
         p = self.estimator.parameters(log_factor)
         freq = self.model.system(p, self.config.position).modes("exact").frequency
         return np.asarray(freq[[k - 1 for k in self.mode_numbers]], dtype=float)
@@ -189,7 +242,25 @@ class Monitor:
         slow: bool = False,
         modal: bool = True,
     ) -> Analysis:
-        """Steps 1-3 for one measurement: features and the component factors (and the slow path if asked)."""
+        """Steps 1-3 for one measurement: features and the component factors (and the slow path if asked).
+
+        Parameters
+        ----------
+        data : FRFData or TimeData
+            One measurement.
+        baseline : Baseline, optional
+            The healthy baseline: its mean FRF gives FRAC and CSF, its fits' residual the misfit check.
+        start : array_like, shape (n,), optional
+            Start log-factors of the fit (default the baseline's constant term, else 0).
+        slow : bool
+            Also run the slow path.
+        modal : bool
+            Also extract the modal features.
+
+        Returns
+        -------
+        Analysis
+        """
         with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
             warnings.simplefilter("always")
             frf = self.prepare(data)
@@ -221,7 +292,20 @@ class Monitor:
         return Analysis(estimate, freq, damp, frac_value, csf_value, slow_estimate, tuple(notes))
 
     def slow_path(self, frf: FRFData, fast: FactorEstimate) -> FactorEstimate:
-        """The full estimation: every stiffness parameter of every component on its own, from the fast path."""
+        """The full estimation: every stiffness parameter of every component on its own, from the fast path.
+
+        Parameters
+        ----------
+        frf : FRFData
+            The measurement's FRFs.
+        fast : FactorEstimate
+            The fast path's estimate (the start).
+
+        Returns
+        -------
+        FactorEstimate
+            One log-factor per stiffness parameter.
+        """
         index = {name: k for k, name in enumerate(fast.names)}
         start = np.array([fast.log_factor[index[comp]] for comp, _ in self._slow_groups])
         with warnings.catch_warnings():
@@ -238,7 +322,30 @@ class Monitor:
         resolution: float = 0.005,
         measurement_ids: Sequence[int] = (),
     ) -> Baseline:
-        """A :class:`Baseline` from healthy analyses, with the mean FRF and the preload map for the dashboard."""
+        """A :class:`Baseline` from healthy analyses, with the mean FRF and the preload map for the dashboard.
+
+        Parameters
+        ----------
+        analyses : sequence of Analysis
+            Analyses of healthy measurements.
+        conditions : sequence of mapping, optional
+            Operating conditions of each measurement (the expectation is quadratic in them).
+        frfs : sequence of FRFData, optional
+            The measurements' FRFs, for the mean healthy FRF.
+        resolution : float
+            Smallest relative change treated as real (0.005 = 0.5 %).
+        measurement_ids : sequence of int
+            Their ids in a history store.
+
+        Returns
+        -------
+        Baseline
+
+        Raises
+        ------
+        DataError
+            ``analyses`` is empty.
+        """
         if not analyses:
             msg = f"machine '{self.config.machine}': a baseline needs healthy measurements; got none"
             raise DataError(msg)
@@ -307,6 +414,22 @@ class Monitor:
         return self._hypotheses
 
     def detector(self, baseline: Baseline) -> SequentialDetector:
+        """The charts of the configuration, standardized by the baseline's scatter.
+
+        Parameters
+        ----------
+        baseline : Baseline
+            The healthy baseline of this machine's components.
+
+        Returns
+        -------
+        SequentialDetector
+
+        Raises
+        ------
+        DataError
+            The baseline's components are not the machine's.
+        """
         if tuple(baseline.names) != self.estimator.names:
             msg = (f"baseline components {list(baseline.names)} differ from the machine's "
                    f"{list(self.estimator.names)}; learn a new baseline")
@@ -325,6 +448,25 @@ class Monitor:
         """Steps 4-6: update the charts, diagnose and grade what they signal, apply the alarm policy.
 
         Returns the new state (JSON-ready), the deviation of the log-factors and the alarms to raise.
+
+        Parameters
+        ----------
+        state : mapping or None
+            The state after the previous measurement (None, or one of another baseline: start afresh).
+        analysis : Analysis
+            This measurement's analysis.
+        conditions : mapping name -> float or None
+            Its operating conditions.
+        baseline : Baseline
+            The healthy baseline.
+
+        Returns
+        -------
+        state : dict
+            The new state.
+        deviation : ndarray, shape (n,)
+            Log-factor deviations from the expectation.
+        alarms : list of Alarm
         """
         detector = self.detector(baseline)
         if state is None or state.get("baseline") != baseline.created:
@@ -367,7 +509,22 @@ class Monitor:
 
 # -- the history store ----------------------------------------------------------------------------------------
 def register_machine(store: Any, config: MonitorConfig, *, replace: bool = False) -> None:
-    """Record a machine's config in a history store (checked against its model first)."""
+    """Record a machine's config in a history store (checked against its model first).
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    config : MonitorConfig
+        The machine's configuration.
+    replace : bool
+        Replace the config of a machine already registered (else that is an error).
+
+    Raises
+    ------
+    DataError
+        The config does not fit its model, or the machine is registered already and ``replace`` is False.
+    """
     Monitor(config)  # compiles the model and checks every name
     store.add_machine(config.machine, config.to_dict(), replace=replace)
 
@@ -398,6 +555,29 @@ def ingest(
     inside it, under the store's per-machine lock, so concurrent ingests continue each other's charts. When
     an alarm is raised, or every ``slow_every`` measurements, the slow path runs afterwards and adds its
     estimates to the same measurement.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    machine : str
+        A registered machine.
+    data : FRFData or TimeData
+        The measurement (SI units).
+    timestamp : datetime
+        When it was taken.
+    source : str
+        Where it came from (a file name), for the record.
+    conditions : mapping name -> float, optional
+        Operating conditions (temperature, speed ...).
+    monitor : Monitor, optional
+        The machine's monitor (built from the stored config when not given).
+    keep_frf : bool
+        Store the FRF in the band with the measurement.
+
+    Returns
+    -------
+    IngestResult
     """
     mon = _monitor_for(store, machine, monitor)
     baseline_doc = store.baseline(machine)
@@ -452,7 +632,32 @@ def learn_store_baseline(
     monitor: Monitor | None = None,
 ) -> Baseline:
     """Learn the healthy baseline from recorded measurements (the first ``first``, or those in a time range),
-    store it, and restart the detector state."""
+    store it, and restart the detector state.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    machine : str
+        A registered machine.
+    first : int, optional
+        Use the first ``first`` measurements in the range.
+    since, until : datetime, optional
+        Time range of the measurements used (default all).
+    resolution : float
+        Smallest relative change treated as real (0.005 = 0.5 %).
+    monitor : Monitor, optional
+        The machine's monitor (built from the stored config when not given).
+
+    Returns
+    -------
+    Baseline
+
+    Raises
+    ------
+    DataError
+        No recorded measurement in the range, or their estimates are incomplete.
+    """
     mon = _monitor_for(store, machine, monitor)
     records = store.measurements(machine, since=since, until=until)
     if first is not None:

@@ -36,6 +36,15 @@ def severity_rank(grade: str | None) -> int:
     """0 for no grade, 1, 2, 3 from tolerable to intolerable; a grade cappe does not know (a store written by
     other software) ranks as the worst, so that it is never hidden.
 
+    Parameters
+    ----------
+    grade : str or None
+        A grade of :data:`SEVERITY_GRADES`, another text, or None.
+
+    Returns
+    -------
+    int
+
     Examples
     --------
     >>> [severity_rank(g) for g in (None, "tolerable", "intolerable", "on fire")]
@@ -47,7 +56,17 @@ def severity_rank(grade: str | None) -> int:
 
 
 def worst_severity(grades: Sequence[str]) -> str | None:
-    """The most severe of ``grades`` (None for none)."""
+    """The most severe of ``grades`` (None for none).
+
+    Parameters
+    ----------
+    grades : sequence of str
+        Severity grades (:func:`severity_rank` orders them).
+
+    Returns
+    -------
+    str or None
+    """
     return max(grades, key=severity_rank) if grades else None
 
 
@@ -82,6 +101,13 @@ class SeverityThresholds:
     in between conditionally tolerable (the operation has to change, thesis 1.1).
 
     Both are fractions of the healthy value (0.05 = 5 %) and apply to the magnitude of the diagnosed change.
+
+    Attributes
+    ----------
+    tolerable : float
+        Relative change below which a fault is tolerable (0.05 = 5 %).
+    intolerable : float
+        Relative change from which it is intolerable (> ``tolerable``).
     """
 
     tolerable: float = 0.05
@@ -95,6 +121,16 @@ class SeverityThresholds:
 
     def grade(self, change: float) -> str:
         """The grade of a relative change (sign ignored).
+
+        Parameters
+        ----------
+        change : float
+            Relative change of the healthy value (0.1 = 10 %).
+
+        Returns
+        -------
+        str
+            One of :data:`SEVERITY_GRADES`.
 
         Examples
         --------
@@ -142,7 +178,9 @@ class MonitorConfig:
     ewma_lambda : float
         Smoothing constant of the EWMA chart.
     severity : SeverityThresholds
-        Default grades; ``severity_overrides`` per component or fault parameter.
+        Default grades.
+    severity_overrides : mapping name -> SeverityThresholds
+        Grades of particular components or fault parameters.
     noise_floor : float
         Weighting floor of the FRF fit, as a fraction of each output's RMS FRF level.
     max_order : int
@@ -219,6 +257,22 @@ class MonitorConfig:
         return tuple(c.name for c in self.components)
 
     def component(self, name: str) -> Component:
+        """The component of that name.
+
+        Parameters
+        ----------
+        name : str
+            Component name.
+
+        Returns
+        -------
+        Component
+
+        Raises
+        ------
+        DataError
+            The machine has no such component.
+        """
         for comp in self.components:
             if comp.name == name:
                 return comp
@@ -226,11 +280,33 @@ class MonitorConfig:
         raise DataError(msg)
 
     def thresholds(self, name: str) -> SeverityThresholds:
-        """Severity thresholds of a component or fault parameter."""
+        """Severity thresholds of a component or fault parameter.
+
+        Parameters
+        ----------
+        name : str
+            Component or fault-parameter name.
+
+        Returns
+        -------
+        SeverityThresholds
+            Its override, else the default.
+        """
         return self.severity_overrides.get(name, self.severity)
 
     def check_model(self, model: NumericModel) -> None:
-        """Every name in the config exists in the model."""
+        """Every name in the config exists in the model.
+
+        Parameters
+        ----------
+        model : NumericModel
+            The compiled model of ``self.model``.
+
+        Raises
+        ------
+        DataError
+            An input, output, parameter or axis of the config is not in the model.
+        """
         known = set(model.parameter_names)
         for what, names, pool in (
             ("input", self.inputs, set(model.input_names)),
@@ -270,7 +346,17 @@ class MonitorConfig:
 
     @classmethod
     def from_dict(cls, data: Mapping[str, Any]) -> MonitorConfig:
-        """Read a config written by :meth:`to_dict`; a wrong format or a missing key is a `DataError`."""
+        """Read a config written by :meth:`to_dict`; a wrong format or a missing key is a `DataError`.
+
+        Parameters
+        ----------
+        data : mapping
+            A ``cappe.monitor-config/1`` document.
+
+        Returns
+        -------
+        MonitorConfig
+        """
         if data.get("format") != CONFIG_FORMAT:
             msg = f"monitor config format must be {CONFIG_FORMAT!r}; got {data.get('format')!r}"
             raise DataError(msg)
@@ -318,6 +404,15 @@ def default_components(structure: Structure) -> tuple[Component, ...]:
 
     Only parameters of kind ``stiffness`` count; elements without one are left out.
 
+    Parameters
+    ----------
+    structure : Structure
+        The model description.
+
+    Returns
+    -------
+    tuple of Component
+
     Examples
     --------
     >>> from cappe.model import load_model
@@ -363,6 +458,38 @@ def default_config(
     Defaults: every input and output; the band from 0.7 x the first to 1.1 x the last natural frequency of the
     reference model; :func:`default_components`; ``preload`` as a fault parameter when the model has one.
     ``settings`` are the remaining :class:`MonitorConfig` fields.
+
+    Parameters
+    ----------
+    model : NumericModel
+        The compiled model of the machine.
+    machine : str
+        Machine id.
+    source : str
+        Model source recorded in the config (``builtin:NAME`` or a YAML path).
+    params : mapping name -> float, optional
+        Parameter overrides (SI) of the healthy reference.
+    position : mapping axis -> float, optional
+        Axis position (m or rad) of the measurements.
+    inputs, outputs : sequence of str, optional
+        Measured FRF channels (default every model input and output).
+    band : (float, float), optional
+        Analysis band in Hz.
+    components : sequence of Component, optional
+        Monitored stiffness groups.
+    fault_parameters : sequence of str, optional
+        Parameters diagnosed on their own.
+    **settings
+        Other :class:`MonitorConfig` fields (``detection``, ``false_alarm_rate`` ...).
+
+    Returns
+    -------
+    MonitorConfig
+
+    Raises
+    ------
+    DataError
+        A name is not in the model, or a setting breaks a rule of :class:`MonitorConfig`.
     """
     given = dict(params or {})
     if band is None:

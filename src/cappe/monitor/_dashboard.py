@@ -667,6 +667,19 @@ class DashboardServer:
     with :meth:`start`; :meth:`shutdown` (or leaving the ``with`` block) stops it, closes the socket and closes the
     store when the server opened it from a path.
 
+    Parameters
+    ----------
+    store : HistoryStore
+        The store the pages read.
+    httpd : ThreadingHTTPServer
+        The bound HTTP server (made by :func:`make_server` with the dashboard's request handler).
+    owns_store : bool
+        Close ``store`` on shutdown (it was opened from a path).
+    asked_host : str
+        The host the server was asked to bind to (a name, an address or a wildcard).
+    allowed_hosts : sequence of str
+        Further names accepted in the ``Host`` header.
+
     Attributes
     ----------
     url : str

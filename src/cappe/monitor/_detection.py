@@ -110,6 +110,18 @@ def _solve_limit(arl: Any, target: float, lo: float, hi: float, what: str) -> fl
 def cusum_limit(arl0: float, k: float) -> float:
     """The decision interval ``h`` of a one-sided CUSUM with reference ``k`` and in-control ARL ``arl0``.
 
+    Parameters
+    ----------
+    arl0 : float
+        In-control average run length (measurements between false alarms).
+    k : float
+        Reference value in standard deviations (half the shift to detect).
+
+    Returns
+    -------
+    float
+        ``h`` in standard deviations.
+
     Examples
     --------
     >>> round(cusum_limit(930.8, 0.5), 2)
@@ -120,6 +132,18 @@ def cusum_limit(arl0: float, k: float) -> float:
 
 def ewma_limit(arl0: float, lam: float) -> float:
     """The limit ``L`` of a two-sided EWMA chart with smoothing ``lam`` and in-control ARL ``arl0``.
+
+    Parameters
+    ----------
+    arl0 : float
+        In-control average run length (measurements between false alarms).
+    lam : float
+        Smoothing constant, 0 < lam <= 1.
+
+    Returns
+    -------
+    float
+        ``L`` in asymptotic standard deviations of the EWMA statistic.
 
     Examples
     --------
@@ -252,6 +276,27 @@ class SequentialDetector:
 
         ``std``, the measurement's own standard uncertainty of each deviation, widens its standardization to
         ``sqrt(scale^2 + std^2)``: a poorly determined estimate moves the charts less.
+
+        Parameters
+        ----------
+        state : mapping or None
+            The state after the previous measurement (None: in control, at the start).
+        deviation : array_like, shape (n,)
+            Deviation of each quantity from its healthy expectation.
+        std : array_like, shape (n,), optional
+            Standard uncertainty of each deviation (same units).
+
+        Returns
+        -------
+        state : dict
+            The new state (JSON-ready).
+        signals : list of ChartSignal
+            The charts beyond their limits.
+
+        Raises
+        ------
+        DataError
+            ``deviation`` or ``std`` has the wrong length or non-finite (``std``: negative) values.
         """
         d = np.asarray(deviation, dtype=float)
         if d.shape != (len(self.names),) or not np.all(np.isfinite(d)):
@@ -289,7 +334,19 @@ class SequentialDetector:
         return st, signals
 
     def in_control(self, state: Mapping[str, Any], name: str) -> bool:
-        """Whether a quantity's chart has come back: CUSUM sums at zero, or EWMA inside half its limit."""
+        """Whether a quantity's chart has come back: CUSUM sums at zero, or EWMA inside half its limit.
+
+        Parameters
+        ----------
+        state : mapping
+            A state returned by :meth:`update`.
+        name : str
+            One of ``names``.
+
+        Returns
+        -------
+        bool
+        """
         i = self.names.index(name)
         if self.method == "cusum":
             return float(state["upper"][i]) == 0.0 and float(state["lower"][i]) == 0.0

@@ -192,7 +192,18 @@ class FactorEstimator:
 
     # -- model side -----------------------------------------------------------------------------------------
     def parameters(self, log_factor: Array) -> Array:
-        """The model parameter vector at group log-factors ``log_factor``."""
+        """The model parameter vector at group log-factors ``log_factor``.
+
+        Parameters
+        ----------
+        log_factor : ndarray, shape (n,)
+            ``ln`` of each group's factor (0: the reference model).
+
+        Returns
+        -------
+        ndarray, shape (n_params,)
+            The reference parameters (SI) with each group's members scaled by its factor.
+        """
         p = self.reference.copy()
         for members, s in zip(self._members, np.asarray(log_factor, dtype=float), strict=True):
             p[members] = self.reference[members] * np.exp(s)
@@ -213,7 +224,20 @@ class FactorEstimator:
         return np.asarray((1j * 2 * np.pi * freq)[None, :] ** self._order[:, None], dtype=complex)
 
     def frf(self, log_factor: Array, freq: Array) -> CArray:
-        """Model FRFs H[out, in, freq] at ``log_factor``."""
+        """Model FRFs H[out, in, freq] at ``log_factor``.
+
+        Parameters
+        ----------
+        log_factor : ndarray, shape (n,)
+            ``ln`` of each group's factor (0: the reference model).
+        freq : ndarray, shape (n_freq,)
+            Frequencies in Hz.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_out, n_in, n_freq)
+            In the outputs' units per input unit (m/N, m/s/N or m/s^2/N).
+        """
         _, lt = self._dynamic(self.parameters(log_factor), np.asarray(freq, dtype=float))
         return np.asarray(np.moveaxis(lt @ self._B, 0, -1) * self._scale(freq)[:, None, :], dtype=complex)
 
@@ -261,7 +285,24 @@ class FactorEstimator:
 
     # -- data side ------------------------------------------------------------------------------------------
     def select(self, data: FRFData) -> tuple[Array, CArray]:
-        """The lines in the band and the configured channels of ``data``: (freq, H[out, in, freq])."""
+        """The lines in the band and the configured channels of ``data``: (freq, H[out, in, freq]).
+
+        Parameters
+        ----------
+        data : FRFData
+            Measured FRFs holding the configured channels.
+
+        Returns
+        -------
+        freq : ndarray, shape (n_lines,)
+            The lines in the band, in Hz.
+        H : ndarray of complex, shape (n_out, n_in, n_lines)
+
+        Raises
+        ------
+        DataError
+            A channel is missing, or the band holds too few lines for the groups.
+        """
         missing = [n for n in self.outputs if n not in data.output_names]
         missing += [n for n in self.inputs if n not in data.input_names]
         if missing:
@@ -309,6 +350,28 @@ class FactorEstimator:
         off. A
         rank-deficient Jacobian or no convergence also gives ``success=False``; every failure warns
         (`ConvergenceWarning`).
+
+        Parameters
+        ----------
+        data : FRFData
+            Measured FRFs holding the configured channels.
+        start : array_like, shape (n,), optional
+            Start log-factors (default 0: the reference model).
+        max_iter : int
+            Levenberg-Marquardt iterations per start.
+        misfit_ratio : float or None
+            Residual over the data's own noise beyond which the fit restarts and then fails; None: no check.
+        misfit_level : float, optional
+            Residual of good fits (relative, like the noise), used instead of the noise when larger.
+
+        Returns
+        -------
+        FactorEstimate
+
+        Raises
+        ------
+        DataError
+            A channel is missing, the band holds too few lines, or the data are zero where the model responds.
         """
         freq, h_meas = self.select(data)
         weights, _ = self._weights(freq)
@@ -440,6 +503,23 @@ class FactorEstimator:
         The least-squares projection (with the fit's own weights) of the FRF change a small relative change of
         ``parameter`` causes onto the group Jacobian at the reference: the signature of, e.g., a preload change
         in the bearing factors, used by the diagnosis.
+
+        Parameters
+        ----------
+        parameter : str
+            A model parameter.
+        data_freq : sequence of float, optional
+            Frequency lines in Hz (default 400 lines over the band).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Change of each group's log-factor per unit change of ``ln parameter``.
+
+        Raises
+        ------
+        DataError
+            ``parameter`` is not in the model.
         """
         if parameter not in self.model.parameter_names:
             msg = f"unknown parameter '{parameter}'; the model has {list(self.model.parameter_names)}"

@@ -81,6 +81,18 @@ def modal_features(
 def frf_features(measured: FRFData, healthy: FRFData) -> tuple[float, float]:
     """Mean FRAC and mean CSF of ``measured`` against the healthy FRF, on the healthy FRF's lines and channels.
 
+    Parameters
+    ----------
+    measured : FRFData
+        The measurement's FRFs.
+    healthy : FRFData
+        The mean healthy FRF (its lines and channels are compared).
+
+    Returns
+    -------
+    frac, csf : float
+        Mean FRAC over the FRFs and mean CSF over lines and FRFs (dimensionless, 1 = identical).
+
     Raises
     ------
     DataError

@@ -93,6 +93,32 @@ def preload_map(
 ) -> PreloadMap:
     """Exact complex modes at every preload, the chosen modes followed by shape (thesis Fig. 5.30).
 
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model; it must have the parameter ``parameter``.
+    preloads : sequence of float
+        Values of ``parameter`` (its unit, e.g. a fraction of nominal), > 0.
+    modes : sequence of int
+        Modes to follow (1-based, at the reference preload).
+    parameter : str
+        The model parameter varied.
+    reference : float
+        The preload whose modes define the columns.
+    params : mapping name -> float, optional
+        Other parameter values (SI).
+    position : mapping axis -> float, optional
+        Axis position (m or rad).
+
+    Returns
+    -------
+    PreloadMap
+
+    Raises
+    ------
+    ModelError
+        The model has no such parameter, or the preloads or modes are invalid.
+
     Examples
     --------
     >>> from cappe.model import load_model
@@ -137,7 +163,35 @@ def preload_frfs(
     params: Mapping[str, float] | None = None,
     position: Mapping[str, float] | None = None,
 ) -> dict[float, FRFData]:
-    """Exact FRFs of the model at each preload (thesis Fig. 5.31: nominal, 75 % and 125 %)."""
+    """Exact FRFs of the model at each preload (thesis Fig. 5.31: nominal, 75 % and 125 %).
+
+    Parameters
+    ----------
+    model : NumericModel or Structure
+        The model; it must have the parameter ``parameter``.
+    freq : sequence of float
+        Frequencies in Hz.
+    preloads : sequence of float
+        Values of ``parameter``.
+    inputs, outputs : sequence of str or str, optional
+        Model inputs and outputs (default all).
+    parameter : str
+        The model parameter varied.
+    params : mapping name -> float, optional
+        Other parameter values (SI).
+    position : mapping axis -> float, optional
+        Axis position (m or rad).
+
+    Returns
+    -------
+    dict
+        ``{preload: FRFData}``.
+
+    Raises
+    ------
+    ModelError
+        The model has no such parameter.
+    """
     nm, _ = _numeric(model, parameter)
     out = {}
     for value in preloads:
@@ -152,6 +206,20 @@ def sensor_visibility(frf: FRFData, mode_frequencies: Sequence[float], *, bandwi
     A mode's level is the largest FRF magnitude within ``bandwidth`` (relative) of its natural frequency;
     0 dB marks the output's strongest mode, -40 dB a mode hard to see next to it (thesis 5.4.3: the third
     resonance 45 dB below the first is "not suitable for detection" with that sensor).
+
+    Parameters
+    ----------
+    frf : FRFData
+        FRFs (model or measured).
+    mode_frequencies : sequence of float
+        Natural frequencies of the modes in Hz.
+    bandwidth : float
+        Relative half-width of the window around each natural frequency (0.02 = +-2 %).
+
+    Returns
+    -------
+    ndarray, shape (n_out, n_in, m)
+        Levels in dB (<= 0).
     """
     f = np.asarray(frf.freq, dtype=float)
     levels = []

@@ -215,7 +215,31 @@ def write_scenario(
     extension: str = "uff",
 ) -> Path:
     """Write one FRF file per measurement and a manifest ``scenario.json`` (the ingest order, times,
-    conditions and truth); return the manifest's path."""
+    conditions and truth); return the manifest's path.
+
+    Parameters
+    ----------
+    measurements : sequence of ScenarioMeasurement
+        The simulated measurements, in ingest order.
+    directory : str or Path
+        Folder to write into (created if needed).
+    machine : str
+        Machine id recorded in the manifest.
+    scenario : str
+        Scenario name recorded in the manifest.
+    extension : {"uff", "csv", "npz"}
+        Format of the FRF files.
+
+    Returns
+    -------
+    Path
+        The manifest.
+
+    Raises
+    ------
+    DataError
+        ``extension`` is not one of these.
+    """
     folder = Path(directory)
     if extension not in ("uff", "csv", "npz"):
         msg = f"scenario files must be uff, csv or npz; got {extension!r}"
@@ -234,7 +258,25 @@ def write_scenario(
 
 
 def read_scenario(path: str | Path) -> tuple[dict[str, Any], list[dict[str, Any]]]:
-    """Read a manifest: the document and its entries with ``file`` resolved and ``timestamp`` parsed."""
+    """Read a manifest: the document and its entries with ``file`` resolved and ``timestamp`` parsed.
+
+    Parameters
+    ----------
+    path : str or Path
+        The ``scenario.json`` manifest.
+
+    Returns
+    -------
+    document : dict
+        The manifest.
+    entries : list of dict
+        One per measurement, ``file`` as a Path next to the manifest and ``timestamp`` as a datetime.
+
+    Raises
+    ------
+    DataError
+        The file cannot be read or breaks a rule of the manifest format (the message names the file).
+    """
     p = Path(path)
     doc = read_json(p, "scenario manifest")
     got = doc.get("format") if isinstance(doc, dict) else type(doc).__name__

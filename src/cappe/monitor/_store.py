@@ -769,7 +769,23 @@ class HistoryStore:
             return list(conn.execute(select(_machines.c.name).order_by(_machines.c.name)).scalars())
 
     def machine_config(self, machine: str) -> dict[str, Any]:
-        """The configuration stored for a machine."""
+        """The configuration stored for a machine.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+
+        Returns
+        -------
+        dict
+            The ``cappe.monitor-config/1`` document.
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
+        """
         with self._read() as conn:
             machine_id = self._machine_id(conn, _name(machine, "machine id"))
             document = conn.execute(select(_machines.c.config).where(_machines.c.id == machine_id)).scalar_one()
@@ -781,6 +797,18 @@ class HistoryStore:
         """Store a new healthy baseline for a machine; earlier ones stay in the history.
 
         Inside an ingest transaction use :meth:`IngestTransaction.set_baseline` instead.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+        baseline : mapping
+            The ``cappe.monitor-baseline/1`` document (JSON-serializable).
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
         """
         name = _name(machine, "machine id")
         document = _dump_json(baseline, f"baseline of machine {name!r}")
@@ -788,7 +816,23 @@ class HistoryStore:
             _insert_baseline(conn, self._machine_id(conn, name), document)
 
     def baseline(self, machine: str) -> dict[str, Any] | None:
-        """The newest baseline of a machine, or None if none was stored."""
+        """The newest baseline of a machine, or None if none was stored.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+
+        Returns
+        -------
+        dict or None
+            The ``cappe.monitor-baseline/1`` document.
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
+        """
         with self._read() as conn:
             machine_id = self._machine_id(conn, _name(machine, "machine id"))
             document = conn.execute(
@@ -876,7 +920,22 @@ class HistoryStore:
         ]
 
     def latest_measurement(self, machine: str) -> MeasurementRecord | None:
-        """A machine's newest measurement, or None if it has none."""
+        """A machine's newest measurement, or None if it has none.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+
+        Returns
+        -------
+        MeasurementRecord or None
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
+        """
         newest = self.measurements(machine, limit=1)
         return newest[0] if newest else None
 
@@ -947,7 +1006,24 @@ class HistoryStore:
         return _frame(rows, ["measurement_id", "timestamp", "path", "parameter", "value", "std"])
 
     def alarms(self, machine: str, *, unacknowledged: bool = False) -> list[AlarmRecord]:
-        """A machine's alarms in time order (then by id); only the unacknowledged ones if asked."""
+        """A machine's alarms in time order (then by id); only the unacknowledged ones if asked.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+        unacknowledged : bool
+            Only the alarms not acknowledged yet.
+
+        Returns
+        -------
+        list of AlarmRecord
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
+        """
         name = _name(machine, "machine id")
         a, m = _alarms, _measurements
         with self._read() as conn:
@@ -969,7 +1045,18 @@ class HistoryStore:
         ]
 
     def acknowledge(self, alarm_id: int) -> None:
-        """Mark an alarm as acknowledged (again is harmless)."""
+        """Mark an alarm as acknowledged (again is harmless).
+
+        Parameters
+        ----------
+        alarm_id : int
+            The alarm's id.
+
+        Raises
+        ------
+        DataError
+            No alarm has that id.
+        """
         ident = _id(alarm_id, "alarm id")
         with self._write() as conn:
             done = conn.execute(
@@ -982,7 +1069,22 @@ class HistoryStore:
                 raise DataError(msg)
 
     def frf(self, measurement_id: int) -> FRFData | None:
-        """The FRF stored with a measurement, or None if it has none."""
+        """The FRF stored with a measurement, or None if it has none.
+
+        Parameters
+        ----------
+        measurement_id : int
+            The measurement's id.
+
+        Returns
+        -------
+        FRFData or None
+
+        Raises
+        ------
+        DataError
+            No measurement has that id.
+        """
         ident = _id(measurement_id, "measurement id")
         with self._read() as conn:
             row = conn.execute(select(_measurements.c.frf).where(_measurements.c.id == ident)).first()
@@ -992,7 +1094,23 @@ class HistoryStore:
         return None if row[0] is None else decode_frf(row[0])
 
     def counts(self, machine: str) -> dict[str, int]:
-        """How many measurements, features, estimates and alarms a machine has."""
+        """How many measurements, features, estimates and alarms a machine has.
+
+        Parameters
+        ----------
+        machine : str
+            A registered machine id.
+
+        Returns
+        -------
+        dict
+            ``{"measurements", "features", "estimates", "alarms": count}``.
+
+        Raises
+        ------
+        DataError
+            The machine is not registered.
+        """
         name = _name(machine, "machine id")
         m = _measurements
         with self._read() as conn:
@@ -1031,6 +1149,17 @@ class IngestTransaction:
 
     Made by :meth:`HistoryStore.transaction`, not directly. Every method raises :class:`DataError` once the
     ``with`` block has ended.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The store.
+    conn : sqlalchemy.engine.Connection
+        The open connection of the transaction (holding the machine's lock).
+    machine : str
+        The machine id.
+    machine_id : int
+        Its row id in the store.
 
     Attributes
     ----------
@@ -1079,14 +1208,26 @@ class IngestTransaction:
         return None if document is None else _load_json(document)
 
     def set_state(self, state: Mapping[str, Any]) -> None:
-        """Replace the machine's detector state (JSON document)."""
+        """Replace the machine's detector state (JSON document).
+
+        Parameters
+        ----------
+        state : mapping
+            The state (JSON-serializable), as :meth:`Monitor.step` returns it.
+        """
         conn = self._connection()
         document = _dump_json(state, f"detector state of machine {self.machine!r}")
         conn.execute(update(_machines).where(_machines.c.id == self._machine_id)
                      .values(state=document, state_updated=datetime.now(UTC)))
 
     def set_baseline(self, baseline: Mapping[str, Any]) -> None:
-        """Store a new baseline for the machine as part of this ingest (see :meth:`HistoryStore.set_baseline`)."""
+        """Store a new baseline for the machine as part of this ingest (see :meth:`HistoryStore.set_baseline`).
+
+        Parameters
+        ----------
+        baseline : mapping
+            The ``cappe.monitor-baseline/1`` document (JSON-serializable).
+        """
         conn = self._connection()
         _insert_baseline(conn, self._machine_id, _dump_json(baseline, f"baseline of machine {self.machine!r}"))
 
