@@ -7,7 +7,7 @@ import time
 
 import numpy as np
 
-from cappe.cli._common import dominant_dofs, emit
+from cappe.cli._common import emit
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -63,7 +63,7 @@ def run(args: argparse.Namespace) -> int:
     lines.append("")
     lines.append("== spindle-bearing (Nickel 1999, 3.5 and 5.4; Table 5.8 values) ==")
     lines.append(f"{sm.n_modes} modes (exact complex):")
-    dominant = dominant_dofs(spindle.M, sm.shapes)
+    dominant = sm.dominant_dofs(spindle.M)
     for r in range(sm.n_modes):
         k = int(dominant[r])
         lines.append(

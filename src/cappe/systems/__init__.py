@@ -3,7 +3,7 @@ data types measured or simulated responses are handed around in (FRFs, time data
 
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import MechanicalSystem
-from cappe.systems.modal import ModalData, ModalDataSet, ModalSet
+from cappe.systems.modal import ModalData, ModalDataSet, ModalSet, dominant_dofs
 from cappe.systems.statespace import StateSpaceModel, simulate
 from cappe.systems.timedata import TimeData, check_clipping
 from cappe.systems.timeresponse import OUTPUT_UNITS, time_response
@@ -22,6 +22,7 @@ __all__ = [
     "TransferFunctionModel",
     "ZeroPoleGainModel",
     "check_clipping",
+    "dominant_dofs",
     "simulate",
     "time_response",
     "transfer_function",

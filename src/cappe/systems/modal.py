@@ -18,7 +18,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import NDArray
 
-__all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "ModalSet"]
+from cappe.exceptions import DataError
+
+__all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "ModalSet", "dominant_dofs"]
 
 #: Format string of modal data documents (:meth:`ModalData.to_dict`; read and written by :mod:`cappe.io`).
 MODAL_FORMAT = "cappe.modal/1"
@@ -64,6 +66,22 @@ class ModalSet:
         """Natural frequencies in rad/s."""
         return 2 * np.pi * self.frequency
 
+    def dominant_dofs(self, mass: NDArray[np.float64]) -> NDArray[np.intp]:
+        """Per mode, the index in :attr:`dofs` of the DOF holding the largest share of its kinetic energy.
+
+        The method form of :func:`dominant_dofs`, on these mode shapes.
+
+        Parameters
+        ----------
+        mass : ndarray, shape (n_dof, n_dof)
+            Mass matrix of the system the modes belong to (kg, kg m^2 on rotations).
+
+        Returns
+        -------
+        ndarray of int, shape (n_modes,)
+        """
+        return dominant_dofs(mass, self.shapes)
+
     def to_dict(self) -> dict[str, Any]:
         modes = []
         for r in range(self.n_modes):
@@ -79,6 +97,51 @@ class ModalSet:
                 entry["rigid"] = True
             modes.append(entry)
         return {"method": self.method, "dofs": list(self.dofs), "modes": modes}
+
+
+def dominant_dofs(mass: NDArray[np.float64], shapes: NDArray[Any]) -> NDArray[np.intp]:
+    """Per mode, the DOF holding the largest share of its kinetic energy, ``Re(conj(phi_i) (M phi)_i)``.
+
+    Unlike the largest shape entry, this compares translations (m) and rotations (rad) in one unit (J), so a
+    mode is named after the coordinate that carries it whatever the units and scaling of its shape.
+
+    Parameters
+    ----------
+    mass : ndarray, shape (n_dof, n_dof)
+        Mass matrix (kg on translations, kg m^2 on rotations).
+    shapes : ndarray, shape (n_dof, n_modes)
+        Mode shapes, one column per mode, real or complex (m or rad per unit modal coordinate; any scaling).
+
+    Returns
+    -------
+    ndarray of int, shape (n_modes,)
+        For each mode, the row of ``shapes`` (index of the DOF) with the largest kinetic energy.
+
+    Raises
+    ------
+    DataError
+        If ``mass`` is not square or its size differs from the number of rows of ``shapes``.
+
+    Examples
+    --------
+    The second mode's largest entry is the translation, but most of its energy is in the rotation:
+
+    >>> import numpy as np
+    >>> from cappe.systems import dominant_dofs
+    >>> mass = np.diag([1.0, 100.0])                    # kg and kg m^2
+    >>> shapes = np.array([[1.0, 1.0], [0.05, -0.5]])   # m and rad; one column per mode
+    >>> dominant_dofs(mass, shapes)
+    array([0, 1])
+    """
+    phi = np.asarray(shapes)
+    m = np.asarray(mass)
+    if m.ndim != 2 or m.shape[0] != m.shape[1] or phi.ndim != 2 or phi.shape[0] != m.shape[0]:
+        msg = (f"dominant_dofs needs a square mass matrix (n_dof, n_dof) and shapes (n_dof, n_modes); "
+               f"got mass {m.shape} and shapes {phi.shape}")
+        raise DataError(msg)
+    energy = np.real(np.conj(phi) * (m @ phi))
+    dominant: NDArray[np.intp] = np.argmax(energy, axis=0)
+    return dominant
 
 
 @dataclass(frozen=True)
