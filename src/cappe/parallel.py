@@ -46,6 +46,20 @@ _PIN_LOCK = threading.Lock()
 def resolve_workers(n_workers: int | None) -> int:
     """Number of worker threads: ``None`` means one per available core.
 
+    Parameters
+    ----------
+    n_workers : int or None
+        A positive number, or None.
+
+    Returns
+    -------
+    int
+
+    Raises
+    ------
+    ValueError
+        ``n_workers`` is not a positive integer or None.
+
     Examples
     --------
     >>> resolve_workers(3)
@@ -64,6 +78,17 @@ def resolve_workers(n_workers: int | None) -> int:
 
 def chunk_slices(n: int, chunk_size: int) -> list[slice]:
     """Consecutive slices of at most ``chunk_size`` covering ``range(n)``.
+
+    Parameters
+    ----------
+    n : int
+        Number of items.
+    chunk_size : int
+        Largest slice length, >= 1.
+
+    Returns
+    -------
+    list of slice
 
     Examples
     --------
@@ -158,6 +183,8 @@ class Executor:
     n_workers : int or None
         Threads or processes (``None``: one per core); ignored for Dask, whose cluster has its own workers.
 
+    Notes
+    -----
     An executor holds no resources between maps except a Dask client, which :meth:`close` (or leaving a
     ``with`` block) releases.
 
@@ -181,7 +208,19 @@ class Executor:
 
     @classmethod
     def coerce(cls, executor: Executor | str | None, n_workers: int | None = None) -> Executor:
-        """An :class:`Executor` from an executor, a kind / address, or ``None`` (threads)."""
+        """An :class:`Executor` from an executor, a kind / address, or ``None`` (threads).
+
+        Parameters
+        ----------
+        executor : Executor, str or None
+            Returned as it is, or the ``kind`` of a new one (None: ``"threads"``).
+        n_workers : int or None
+            Workers of a new executor.
+
+        Returns
+        -------
+        Executor
+        """
         if isinstance(executor, Executor):
             return executor
         return cls("threads" if executor is None else executor, n_workers)
@@ -219,7 +258,22 @@ class Executor:
 
     def map(self, func: Callable[[Any], T], items: Sequence[Any],
             done: Callable[[Any], None] | None = None) -> list[T]:
-        """``[func(item) for item in items]`` on this executor, in order; ``done(item)`` after each item."""
+        """``[func(item) for item in items]`` on this executor, in order; ``done(item)`` after each item.
+
+        Parameters
+        ----------
+        func : callable
+            ``func(item)`` -> result (picklable for processes and Dask).
+        items : sequence
+            The items.
+        done : callable, optional
+            ``done(item)`` called in this process after each item (e.g. a progress bar's update).
+
+        Returns
+        -------
+        list
+            The results in the order of ``items``.
+        """
         items = list(items)
 
         def call_here(item: Any) -> T:

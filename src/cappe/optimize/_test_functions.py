@@ -41,6 +41,10 @@ class BenchmarkFunction:
         Global minimum value.
     minimizers : ndarray, shape (k, n)
         Every global minimizer.
+    func : callable
+        ``func(x)`` for points as columns, ``x`` of shape (n, S) -> values (S,).
+    grad : callable or None
+        ``grad(x)`` -> gradients (n, S), where known analytically.
     local_minima : ndarray, shape (m, n) or None
         Every local minimum inside the box (global ones included) where the function has few; None otherwise.
     scalable : bool
@@ -82,14 +86,44 @@ class BenchmarkFunction:
         return float(out) if arr.ndim == 1 else np.asarray(out, dtype=float)
 
     def gradient(self, x: ArrayLike) -> Array:
-        """Analytic gradient, shaped like ``x`` ((n,) or (n, S))."""
+        """Analytic gradient, shaped like ``x`` ((n,) or (n, S)).
+
+        Parameters
+        ----------
+        x : array_like, shape (n,) or (n, S)
+            One point, or a batch of S points as columns.
+
+        Returns
+        -------
+        ndarray, shape like ``x``
+
+        Raises
+        ------
+        DataError
+            The function has no analytic gradient.
+        """
         if self.grad is None:
             msg = f"test function {self.name!r} has no analytic gradient"
             raise DataError(msg)
         return np.asarray(self.grad(self._points(x)), dtype=float)
 
     def in_dim(self, n: int) -> BenchmarkFunction:
-        """The same function in ``n`` variables (scalable functions only)."""
+        """The same function in ``n`` variables (scalable functions only).
+
+        Parameters
+        ----------
+        n : int
+            Number of variables, >= 1.
+
+        Returns
+        -------
+        BenchmarkFunction
+
+        Raises
+        ------
+        DataError
+            The function is not scalable, or ``n < 1``.
+        """
         if not self.scalable:
             msg = f"test function {self.name!r} is defined in {self.n} variables only; got n={n}"
             raise DataError(msg)

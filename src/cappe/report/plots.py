@@ -29,7 +29,22 @@ __all__ = [
 
 
 def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
-    """Bode magnitude (dB re 1 unit) and phase (deg) of every output/input pair, written to ``path``."""
+    """Bode magnitude (dB re 1 unit) and phase (deg) of every output/input pair, written to ``path``.
+
+    Parameters
+    ----------
+    frf : FRFData
+        The FRFs.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, axes = _figure(2)
     ax_mag, ax_phase = axes
     for o, out in enumerate(frf.output_names):
@@ -52,6 +67,22 @@ def frf_plot(frf: FRFData, path: str | Path, title: str = "", *, coherence_thres
     """Measured FRFs: magnitude, phase and (when estimated) coherence of every output/input pair.
 
     The coherence panel marks ``coherence_threshold``; frequency axis linear in Hz, magnitude on a log scale.
+
+    Parameters
+    ----------
+    frf : FRFData
+        The FRFs (with coherence for the third panel).
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+    coherence_threshold : float
+        Coherence level marked in the coherence panel (0..1).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     rows = 3 if frf.coherence is not None else 2
     fig, axes = _figure(rows)
@@ -95,6 +126,24 @@ def stabilization_plot(
     ``diagram`` is a :class:`cappe.identify.StabilizationDiagram`; ``frf`` adds the sum of |H| over all pairs
     (right axis, log) and ``selected`` (a :class:`cappe.identify.PoleSelection` or anything with ``frequency``)
     draws the chosen physical poles as vertical lines. Excluded poles are not drawn.
+
+    Parameters
+    ----------
+    diagram : StabilizationDiagram
+        The poles per order with their flags.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    frf : FRFData, optional
+        FRFs drawn behind the poles.
+    selected : PoleSelection, optional
+        The chosen poles (frequencies in Hz).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     fig, axes = _figure(1)
     ax = axes
@@ -125,7 +174,22 @@ def stabilization_plot(
 
 
 def pole_zero_plot(model: ZeroPoleGainModel, path: str | Path, title: str = "") -> Path:
-    """Pole-zero map in the s-plane (rad/s), written to ``path``."""
+    """Pole-zero map in the s-plane (rad/s), written to ``path``.
+
+    Parameters
+    ----------
+    model : ZeroPoleGainModel
+        Poles and zeros in rad/s.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, ax = _figure(1)
     ax.plot(model.poles.real, model.poles.imag, "x", markersize=9, label="poles")
     if model.zeros.size:
@@ -151,6 +215,20 @@ def pruning_plot(pruned: Any, path: str | Path, title: str = "") -> Path:
 
     ``pruned`` is a :class:`cappe.identify.PrunedModel`; coordinates are continuous-time (rad/s). The unpruned
     model is the union of kept and removed roots.
+
+    Parameters
+    ----------
+    pruned : PrunedModel
+        The pruned model.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     fig, ax = _figure(1)
     removed = list(pruned.removed_poles) + list(pruned.removed_zeros)
@@ -178,7 +256,22 @@ def pruning_plot(pruned: Any, path: str | Path, title: str = "") -> Path:
 
 
 def correlation_plot(estimate: Any, path: str | Path, title: str = "") -> Path:
-    """The correlation matrix of a :class:`cappe.estimate.ParameterEstimate` (non-identifiable entries blank)."""
+    """The correlation matrix of a :class:`cappe.estimate.ParameterEstimate` (non-identifiable entries blank).
+
+    Parameters
+    ----------
+    estimate : ParameterEstimate
+        The estimate (its ``names`` and ``correlation``).
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, ax = _figure(1)
     corr = np.asarray(estimate.correlation, dtype=float)
     image = ax.imshow(np.ma.masked_invalid(corr), cmap="RdBu_r", vmin=-1, vmax=1)
@@ -197,7 +290,28 @@ def correlation_plot(estimate: Any, path: str | Path, title: str = "") -> Path:
 def trajectory_plot(
     time: Any, trajectories: Any, names: Any, path: str | Path, *, truth: Any = None, title: str = ""
 ) -> Path:
-    """Parameter estimates over time (e.g. an EKF's), each relative to its final value or to ``truth``."""
+    """Parameter estimates over time (e.g. an EKF's), each relative to its final value or to ``truth``.
+
+    Parameters
+    ----------
+    time : array_like, shape (n_t,)
+        Time in s.
+    trajectories : array_like, shape (n_t, n)
+        Estimates over time (SI).
+    names : sequence of str
+        The n parameters.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    truth : array_like, shape (n,), optional
+        Reference values (SI; default the final estimates).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, ax = _figure(1)
     values = np.asarray(trajectories, dtype=float)
     ref = np.asarray(truth, dtype=float) if truth is not None else values[-1]
@@ -219,6 +333,28 @@ def response_plot(
     """Measured response against the model's before and after estimation, one panel per channel.
 
     ``measured``, ``before`` and ``after`` are (n_channels, n_points) real arrays (magnitudes for FRFs, ``log=True``).
+
+    Parameters
+    ----------
+    x : array_like, shape (n_points,)
+        Abscissa (time in s, or frequency in Hz).
+    measured, before, after : array_like, shape (n_channels, n_points)
+        Measured response and the model's before and after estimation (channel units).
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    labels : sequence of str
+        Channel names, one panel each.
+    xlabel : str
+        Abscissa label.
+    log : bool
+        Logarithmic ordinate.
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     rows = len(labels)
     fig, axes = _figure(rows)
@@ -238,7 +374,22 @@ def response_plot(
 
 
 def preload_map_plot(preload_map: Any, path: str | Path, title: str = "") -> Path:
-    """Frequency-damping map over preload (thesis Fig. 5.30): one trace per mode, preloads labelled in %."""
+    """Frequency-damping map over preload (thesis Fig. 5.30): one trace per mode, preloads labelled in %.
+
+    Parameters
+    ----------
+    preload_map : PreloadMap
+        Frequencies (Hz) and damping ratios of the modes over the preloads.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title (none when empty).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, axes = _figure(1)
     ax = axes
     for j, mode in enumerate(preload_map.modes):

@@ -66,7 +66,20 @@ class ModelSobolResult:
         return self.sobol.names
 
     def significant(self, threshold: float = 0.01, *, by: str = "ST") -> dict[str, tuple[str, ...]]:
-        """Parameters whose index exceeds ``threshold`` for each output (the paper uses ST > 1 %)."""
+        """Parameters whose index exceeds ``threshold`` for each output (the paper uses ST > 1 %).
+
+        Parameters
+        ----------
+        threshold : float
+            Sobol' index above which a parameter is significant (dimensionless, 0.01 = 1 %).
+        by : {"ST", "S1"}
+            Total or first-order index.
+
+        Returns
+        -------
+        dict
+            ``{output name: parameter names}``, largest index first.
+        """
         values = self.sobol.ST if by == "ST" else self.sobol.S1
         out = {}
         for o, name in enumerate(self.sobol.output_names):
@@ -97,7 +110,22 @@ class ModelSobolResult:
         }
 
     def plot(self, path: str | Path, *, outputs: Sequence[str] | None = None, top: int = 10) -> Path:
-        """S1 and ST bars with confidence whiskers, ``top`` parameters per output (paper Fig. 5)."""
+        """S1 and ST bars with confidence whiskers, ``top`` parameters per output (paper Fig. 5).
+
+        Parameters
+        ----------
+        path : str or Path
+            Image file to write (format from the extension: .png, .svg, .pdf ...).
+        outputs : sequence of str, optional
+            Output names, one panel each (default the first six).
+        top : int
+            Parameters per panel, largest ST first.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         return sobol_plot(self.sobol, path, outputs=outputs, top=top)
 
 

@@ -47,6 +47,21 @@ def modal_sensitivity(
     ``result.relative()`` gives thesis eq. 4.12, ``(1/Q) dQ/dp``; ``result.normalized()`` the dimensionless
     ``(p/Q) dQ/dp`` (per cent change of Q per per cent change of p).
 
+    Parameters
+    ----------
+    model : NumericModel, Structure or ModalEngine
+        The model (an engine's model is used with the DOFs as sensors).
+    params : array (n_params,), mapping or None
+        One parameter vector (SI; default nominal).
+    position : mapping or None
+        Axis position in m or rad.
+    n_modes : int, optional
+        Number of modes (lowest first; default all).
+
+    Returns
+    -------
+    ModalDerivatives
+
     Examples
     --------
     >>> from cappe.model import load_model
@@ -114,7 +129,17 @@ class PercentageTable:
         return pd.DataFrame(data)
 
     def to_text(self, decimals: int = 1) -> str:
-        """The table as text, in the layout of thesis Table 5.3."""
+        """The table as text, in the layout of thesis Table 5.3.
+
+        Parameters
+        ----------
+        decimals : int
+            Decimals of the per cent changes.
+
+        Returns
+        -------
+        str
+        """
         m = self.frequency.size
         head = ["parameter", "change"] + [f"f{r + 1} %" for r in range(m)] + [f"zeta{r + 1} %" for r in range(m)]
         lines = ["  ".join(f"{h:>9}" for h in head)]
@@ -139,6 +164,30 @@ def percentage_table(
 
     All ``2 * n_parameters`` perturbed models are evaluated in one batch; each perturbed mode is tracked to
     the nominal mode it came from (mass-weighted MAC).
+
+    Parameters
+    ----------
+    model : NumericModel, Structure or ModalEngine
+        The model (an engine's model is used with the DOFs as sensors).
+    params : array (n_params,), mapping or None
+        One parameter vector (SI; default nominal).
+    position : mapping or None
+        Axis position in m or rad.
+    percent : float
+        Parameter change in per cent, 0 < percent < 100.
+    parameters : sequence of str, optional
+        Parameters to change (default all).
+    n_modes : int, optional
+        Number of modes (lowest first; default all).
+
+    Returns
+    -------
+    PercentageTable
+
+    Raises
+    ------
+    ModelError
+        ``percent`` is out of range, ``params`` is a batch or a parameter is unknown.
 
     Examples
     --------
@@ -241,7 +290,18 @@ class ModalCost:
         return total if p.ndim == 2 else total[0]
 
     def gradient(self, params: ParamsLike = None) -> Array:
-        """Analytic gradient ``dQ/dp`` (n_params,) from the modal derivatives."""
+        """Analytic gradient ``dQ/dp`` (n_params,) from the modal derivatives.
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI; default nominal).
+
+        Returns
+        -------
+        ndarray, shape (n_params,)
+            ``dQ/dp`` per SI unit of each parameter.
+        """
         p = self.engine.model.vector(params)
         grad = np.zeros(p.size)
         w_f, w_z, w_s = self.weights
@@ -297,7 +357,24 @@ class CostLandscape:
                 "values": self.values.tolist(), "minimum": list(self.minimum)}
 
     def plot(self, path: str | Path, *, title: str = "", log: bool = True, levels: int = 30) -> Path:
-        """Write a filled contour plot of the landscape (log10 of the cost by default) to ``path``."""
+        """Write a filled contour plot of the landscape (log10 of the cost by default) to ``path``.
+
+        Parameters
+        ----------
+        path : str or Path
+            Image file to write (format from the extension: .png, .svg, .pdf ...).
+        title : str
+            Figure title.
+        log : bool
+            Contour ``log10`` of the cost.
+        levels : int
+            Number of contour levels.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         return landscape_plot(self, path, title, log=log, levels=levels)
 
 

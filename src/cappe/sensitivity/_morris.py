@@ -83,7 +83,18 @@ class MorrisResult:
         _readonly(self.mu, self.mu_star, self.sigma, self.mu_star_conf, self.X, self.Y)
 
     def top_parameters(self, k: int = 5) -> dict[str, tuple[str, ...]]:
-        """The k parameters with the largest mu_star for each output, largest first."""
+        """The k parameters with the largest mu_star for each output, largest first.
+
+        Parameters
+        ----------
+        k : int
+            Parameters per output.
+
+        Returns
+        -------
+        dict
+            ``{output name: parameter names}``.
+        """
         return _top(self.mu_star, self.names, self.output_names, k)
 
     def to_dict(self) -> dict[str, Any]:

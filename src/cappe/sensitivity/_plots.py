@@ -18,7 +18,26 @@ __all__ = ["landscape_plot", "sobol_plot"]
 
 
 def landscape_plot(landscape: Any, path: str | Path, title: str = "", *, log: bool = True, levels: int = 30) -> Path:
-    """Filled contours of a two-parameter cost landscape (:class:`cappe.sensitivity.CostLandscape`)."""
+    """Filled contours of a two-parameter cost landscape (:class:`cappe.sensitivity.CostLandscape`).
+
+    Parameters
+    ----------
+    landscape : CostLandscape
+        The cost on a grid of two unknowns.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    title : str
+        Figure title.
+    log : bool
+        Contour ``log10`` of the cost.
+    levels : int
+        Number of contour levels.
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     fig, ax = _figure(1)
     values = np.asarray(landscape.values, dtype=float)
     shown = np.log10(np.maximum(values, np.finfo(float).tiny)) if log else values
@@ -38,6 +57,29 @@ def sobol_plot(result: Any, path: str | Path, *, outputs: Any = None, top: int =
 
     ``result`` is a :class:`cappe.sensitivity.SobolResult`; ``outputs`` selects output names (default: the
     first ``max_panels``).
+
+    Parameters
+    ----------
+    result : SobolResult
+        The indices with their confidence half-widths.
+    path : str or Path
+        Image file to write (format from the extension: .png, .svg, .pdf ...).
+    outputs : sequence of str, optional
+        Output names, one panel each.
+    top : int
+        Parameters per panel, largest ST first.
+    max_panels : int
+        Panels drawn when ``outputs`` is not given.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        An output name is not in ``result``.
     """
     import matplotlib
 
