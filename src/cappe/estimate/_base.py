@@ -53,13 +53,31 @@ class CostFunction:
 @dataclass(frozen=True)
 class Fitted:
     """What an estimator's ``_fit`` may return instead of a bare estimate: the estimate and the cost it minimized
-    (:func:`least_squares_fit` makes one), kept by :meth:`Estimator.fit` as ``cost_function_``."""
+    (:func:`least_squares_fit` makes one), kept by :meth:`Estimator.fit` as ``cost_function_``.
+
+    Attributes
+    ----------
+    estimate : ParameterEstimate
+        The result.
+    cost : CostFunction or None
+        The cost minimized (None where every start failed).
+    """
 
     estimate: ParameterEstimate
     cost: CostFunction | None = None
 
     def with_estimate(self, estimate: ParameterEstimate) -> Fitted:
-        """The same cost with a post-processed estimate (more diagnostics, physical unknowns only ...)."""
+        """The same cost with a post-processed estimate (more diagnostics, physical unknowns only ...).
+
+        Parameters
+        ----------
+        estimate : ParameterEstimate
+            The post-processed estimate.
+
+        Returns
+        -------
+        Fitted
+        """
         return replace(self, estimate=estimate)
 
 
@@ -317,7 +335,15 @@ def least_squares_fit(
     """:func:`fit_least_squares` with the cost it minimized: what an estimator's ``_fit`` returns so that
     :meth:`Estimator.cost_slice` can slice that cost (``cost`` is None where every start failed).
 
-    Parameters are those of :func:`fit_least_squares`.
+    Parameters
+    ----------
+    method, space, residuals, jacobian, starts, noise_variance, diagnostics, max_nfev, x_scale, strategy, rng
+        As for :func:`fit_least_squares`.
+
+    Returns
+    -------
+    Fitted
+        The estimate and its :class:`CostFunction`.
 
     Examples
     --------
