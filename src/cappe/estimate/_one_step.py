@@ -64,6 +64,7 @@ from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.model.numeric import ParamsLike
+from cappe.systems.dynamic_stiffness import frf_lines
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
 from cappe.systems.timedata import TimeData
@@ -640,26 +641,25 @@ class FRFDerivatives:
 
 def _frf_core(model: NumericModel, params: Array, position: Mapping[str, float] | None, freq: Array,
               inputs: Sequence[int], outputs: Sequence[int], columns: Sequence[int] | None) -> tuple[CArray, CArray]:
-    """H (n_out, n_in, n_f) and, for ``columns`` (parameter indices), dH (n_c, n_out, n_in, n_f)."""
+    """H (n_out, n_in, n_f) and, for ``columns`` (parameter indices), dH (n_c, n_out, n_in, n_f): the dynamic
+    stiffness kernel (:func:`cappe.systems.dynamic_stiffness.frf_lines`) plus the terms of input and output
+    matrices that depend on parameters."""
     mats = model.matrices(params, position)
     b_mat, s_mat = model.io_matrices(params, position)
     w = 2 * np.pi * freq
-    z = ((mats["K"] + 1j * mats["H"])[None] + 1j * w[:, None, None] * (mats["C"] + mats["G"])[None]
-         - (w**2)[:, None, None] * mats["M"][None])
-    b = b_mat[:, list(inputs)].astype(complex)
-    s = s_mat[list(outputs)].astype(complex)
-    x = np.linalg.solve(z, np.broadcast_to(b, (freq.size, *b.shape)))  # Z^-1 B (n_f, n, n_in)
+    cols = None if columns is None else list(columns)
+    derivs = None
+    if cols is not None:
+        d = model.matrix_derivatives(params, position)
+        derivs = {name: d[name][cols] for name in ("M", "C", "K", "G", "H")}
+    lines = frf_lines(mats, w, b_mat[:, list(inputs)], s_mat[list(outputs)], derivatives=derivs)
     order = np.array([DERIVATIVE_ORDER[model.output_quantities[o]] for o in outputs])
     factor = (1j * w)[None, :] ** order[:, None]  # (n_out, n_f)
-    h = np.einsum("on,fni->oif", s, x) * factor[:, None, :]
-    if columns is None:
+    h = np.moveaxis(lines.H, 0, -1) * factor[:, None, :]
+    if cols is None or lines.L is None:
         return h, np.zeros((0, *h.shape), dtype=complex)
-    cols = list(columns)
-    yt = np.linalg.solve(np.swapaxes(z, 1, 2), np.broadcast_to(s.T, (freq.size, *s.T.shape)))  # (S Z^-1)^T
-    d = model.matrix_derivatives(params, position)
-    dz = ((d["K"][cols] + 1j * d["H"][cols])[:, None] + 1j * w[None, :, None, None] * (d["C"][cols] + d["G"][cols])[
-        :, None] - (w**2)[None, :, None, None] * d["M"][cols][:, None])  # (n_c, n_f, n, n)
-    dh = -np.einsum("fno,cfnm,fmi->coif", yt, dz, x, optimize=True)
+    x, lt = lines.X, lines.L
+    dh = np.moveaxis(lines.dH, 1, -1)
     # input and output matrices may depend on parameters (lengths): central differences, exact for affine terms
     for k, col in enumerate(cols):
         step = 1e-6 * max(abs(params[col]), 1e-6)
@@ -671,7 +671,7 @@ def _frf_core(model: NumericModel, params: Array, position: Mapping[str, float] 
         db = (bp - bm_)[:, list(inputs)] / (2 * step)
         ds = (sp_ - sm)[list(outputs)] / (2 * step)
         if np.any(db):
-            dh[k] += np.einsum("fno,ni->oif", yt, db)
+            dh[k] += np.einsum("fon,ni->oif", lt, db)
         if np.any(ds):
             dh[k] += np.einsum("on,fni->oif", ds, x)
     return h, dh * factor[None, :, None, :]

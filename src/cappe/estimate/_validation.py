@@ -47,6 +47,7 @@ from cappe.exceptions import DataError
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
 from cappe.parallel import chunk_slices
+from cappe.systems.dynamic_stiffness import frf_lines
 from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ValidationResult", "find_set", "model_receptance", "summarize", "validate_identification"]
@@ -282,23 +283,12 @@ def _receptance_lines(model: NumericModel, params: Array, position: Mapping[str,
         msg = f"channels {sorted(set(missing))} are not sensor channels of model '{model.structure.name}'"
         raise DataError(msg)
     s_out = rows[[index[c] for c in outputs]]
-    s_in_t = np.ascontiguousarray(rows[[index[c] for c in inputs]].T).astype(complex)  # (n, n_in)
+    s_in_t = rows[[index[c] for c in inputs]].T  # (n, n_in)
     mats = model.matrices(params, position)
-    damping = mats["C"] + mats["G"]
     omega = 2 * np.pi * np.asarray(freq, dtype=float)
     out = np.empty((omega.size, s_out.shape[0], s_in_t.shape[1]), dtype=complex)
-    for s in chunk_slices(omega.size, _BLOCK_LINES):
-        w = omega[s]
-        # the dynamic stiffness of the block's lines, real and imaginary parts written in place
-        dyn = np.empty((w.size, *mats["K"].shape), dtype=complex)
-        np.multiply(-(w**2)[:, None, None], mats["M"], out=dyn.real)
-        dyn.real += mats["K"]
-        np.multiply(w[:, None, None], damping, out=dyn.imag)
-        dyn.imag += mats["H"]
-        x = np.linalg.solve(dyn, np.broadcast_to(s_in_t, (w.size, *s_in_t.shape)))  # (lines, n, n_in)
-        # S_out x as real products on the interleaved real and imaginary parts (a real @ complex matmul takes
-        # numpy's slow non-BLAS loop), written straight into the block of the result
-        np.matmul(s_out, x.view(np.float64), out=out[s].view(np.float64))
+    for s in chunk_slices(omega.size, _BLOCK_LINES):  # blocks of lines small enough for the CPU caches
+        out[s] = frf_lines(mats, omega[s], s_in_t, s_out).H
     return out
 
 
