@@ -25,7 +25,12 @@ class FRFData:
     freq : ndarray, shape (n_freq,)
         Frequencies in Hz.
     H : ndarray, shape (n_out, n_in, n_freq)
-        Complex frequency responses.
+        Complex frequency responses (output unit per input unit).
+    input_names, output_names : tuple of str
+        Channels along the second and first axes of ``H``.
+    output_quantities : tuple of str
+        ``"displacement"``, ``"velocity"`` or ``"acceleration"`` per output; empty when unknown (read as
+        displacement).
     coherence : ndarray, shape (n_out, n_in, n_freq), optional
         Ordinary (single input) or multiple coherence of measured FRFs in [0, 1]; None for model FRFs.
     window_decay : float, optional
@@ -78,7 +83,22 @@ class FRFData:
         object.__setattr__(self, "freq", freq)
 
     def response(self, output: str, input: str) -> NDArray[np.complex128]:  # noqa: A002
-        """The FRF of one output/input pair."""
+        """The FRF of one output/input pair.
+
+        Parameters
+        ----------
+        output, input : str
+            Output and input channel names.
+
+        Returns
+        -------
+        ndarray of complex, shape (n_freq,)
+
+        Raises
+        ------
+        ValueError
+            A name is not a channel of the FRFs.
+        """
         return np.asarray(self.H[self.output_names.index(output), self.input_names.index(input)], dtype=complex)
 
     def to_dict(self) -> dict[str, Any]:

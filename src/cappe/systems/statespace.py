@@ -17,7 +17,25 @@ Array = NDArray[np.float64]
 
 @dataclass(frozen=True)
 class StateSpaceModel:
-    """``x' = A x + B u, y = C x + D u`` (``dt is None``) or ``x[k+1] = A x[k] + B u[k]`` (sample time dt, s)."""
+    """``x' = A x + B u, y = C x + D u`` (``dt is None``) or ``x[k+1] = A x[k] + B u[k]`` (sample time dt, s).
+
+    Attributes
+    ----------
+    A : ndarray, shape (n, n)
+        State matrix (1/s for a continuous model).
+    B : ndarray, shape (n, n_in)
+        Input matrix.
+    C : ndarray, shape (n_out, n)
+        Output matrix.
+    D : ndarray, shape (n_out, n_in)
+        Feed-through matrix.
+    dt : float or None
+        Sample time in s; None for a continuous model.
+    state_names, input_names, output_names : tuple of str
+        Labels of the states, inputs and outputs (may be empty).
+    method : str
+        How a discrete model was obtained (``"zoh"``, ``"tustin"``); empty otherwise.
+    """
 
     A: Array
     B: Array
@@ -42,7 +60,25 @@ class StateSpaceModel:
         return np.asarray(np.linalg.eigvals(self.A), dtype=complex)
 
     def discretize(self, dt: float, method: str = "zoh") -> StateSpaceModel:
-        """Discrete model by zero-order hold (``"zoh"``) or the bilinear transform (``"tustin"``)."""
+        """Discrete model by zero-order hold (``"zoh"``) or the bilinear transform (``"tustin"``).
+
+        Parameters
+        ----------
+        dt : float
+            Sample time in s, > 0.
+        method : {"zoh", "tustin"}
+            Discretization.
+
+        Returns
+        -------
+        StateSpaceModel
+            The discrete model.
+
+        Raises
+        ------
+        ModelError
+            The model is discrete already, ``dt`` is not positive or ``method`` unknown.
+        """
         if self.is_discrete:
             msg = "model is already discrete"
             raise ModelError(msg)
@@ -83,7 +119,22 @@ class StateSpaceModel:
         t: NDArray[np.floating[Any]] | None = None,
         x0: NDArray[np.floating[Any]] | None = None,
     ) -> tuple[Array, Array]:
-        """Time response; see :func:`simulate`."""
+        """Time response; see :func:`simulate`.
+
+        Parameters
+        ----------
+        u : ndarray, shape (n_samples, n_in) or (n_samples,)
+            Inputs per sample.
+        t : ndarray, shape (n_samples,), optional
+            Uniform sample times in s (needed for a continuous model).
+        x0 : ndarray, shape (n,), optional
+            Initial state (default zero).
+
+        Returns
+        -------
+        y : ndarray, shape (n_samples, n_out)
+        x : ndarray, shape (n_samples, n)
+        """
         return simulate(self, u, t, x0)
 
 
@@ -98,6 +149,24 @@ def simulate(
     For a continuous model ``t`` (uniform, s) is required and the input is held constant over each sample
     (zero-order hold), so the result equals that of ``model.discretize(dt, "zoh")`` exactly. A discrete
     model ignores ``t``.
+
+    Parameters
+    ----------
+    model : StateSpaceModel
+        The model.
+    u : ndarray, shape (n_samples, n_in) or (n_samples,)
+        Inputs per sample.
+    t : ndarray, shape (n_samples,), optional
+        Uniform sample times in s (needed for a continuous model).
+    x0 : ndarray, shape (n,), optional
+        Initial state (default zero).
+
+    Returns
+    -------
+    y : ndarray, shape (n_samples, n_out)
+        Outputs.
+    x : ndarray, shape (n_samples, n)
+        States.
 
     Examples
     --------

@@ -98,7 +98,26 @@ class TimeData:
         channels: Mapping[str, ArrayLike],
         units: Mapping[str, str] | None = None,
     ) -> TimeData:
-        """Build from a time vector and a mapping ``name -> samples``; lengths are checked per channel."""
+        """Build from a time vector and a mapping ``name -> samples``; lengths are checked per channel.
+
+        Parameters
+        ----------
+        time : array_like, shape (n_samples,)
+            Uniform, increasing sample times in s.
+        channels : mapping name -> array_like, shape (n_samples,)
+            The samples of each channel (SI units).
+        units : mapping name -> str, optional
+            Unit of some or all channels (``"N"``, ``"m/s^2"`` ...).
+
+        Returns
+        -------
+        TimeData
+
+        Raises
+        ------
+        DataError
+            A channel's length differs from ``time``'s, or a rule of TimeData is broken.
+        """
         t = np.asarray(time, dtype=float)
         rows = []
         for name, samples in channels.items():
@@ -113,7 +132,26 @@ class TimeData:
 
     @classmethod
     def from_rate(cls, fs: float, channels: Mapping[str, ArrayLike], t0: float = 0.0) -> TimeData:
-        """Build from a sampling rate ``fs`` (Hz) and a mapping ``name -> samples``."""
+        """Build from a sampling rate ``fs`` (Hz) and a mapping ``name -> samples``.
+
+        Parameters
+        ----------
+        fs : float
+            Sampling rate in Hz, > 0.
+        channels : mapping name -> array_like, shape (n_samples,)
+            The samples of each channel (all of the same length).
+        t0 : float
+            Time of the first sample in s.
+
+        Returns
+        -------
+        TimeData
+
+        Raises
+        ------
+        DataError
+            ``fs`` is not positive or the channels differ in length.
+        """
         rate = positive_number("fs", fs, "Hz")
         lengths = {name: np.asarray(v).size for name, v in channels.items()}
         n = max(lengths.values(), default=0)
@@ -146,7 +184,18 @@ class TimeData:
         return float(self.time[-1] - self.time[0] + self.dt)
 
     def index(self, channel: str) -> int:
-        """Row of a channel; unknown names raise a DataError listing the available ones."""
+        """Row of a channel; unknown names raise a DataError listing the available ones.
+
+        Parameters
+        ----------
+        channel : str
+            Channel name.
+
+        Returns
+        -------
+        int
+            Index into ``channels`` and the rows of ``values``.
+        """
         try:
             return self.channels.index(channel)
         except ValueError:
@@ -154,16 +203,62 @@ class TimeData:
             raise DataError(msg) from None
 
     def channel(self, name: str) -> NDArray[np.float64]:
-        """Samples of one channel, shape (n_samples,)."""
+        """Samples of one channel, shape (n_samples,).
+
+        Parameters
+        ----------
+        name : str
+            Channel name.
+
+        Returns
+        -------
+        ndarray, shape (n_samples,)
+
+        Raises
+        ------
+        DataError
+            No channel has that name.
+        """
         return np.asarray(self.values[self.index(name)])
 
     def select(self, names: Sequence[str]) -> TimeData:
-        """A new TimeData holding only the given channels, in the given order."""
+        """A new TimeData holding only the given channels, in the given order.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Channel names.
+
+        Returns
+        -------
+        TimeData
+
+        Raises
+        ------
+        DataError
+            A name is not a channel.
+        """
         rows = [self.index(n) for n in names]
         units = tuple(self.units[r] for r in rows) if self.units else ()
         return TimeData(self.time, self.values[rows], tuple(names), units)
 
     def unit(self, name: str) -> str:
+        """The unit of one channel (empty when unknown).
+
+        Parameters
+        ----------
+        name : str
+            Channel name.
+
+        Returns
+        -------
+        str
+
+        Raises
+        ------
+        DataError
+            No channel has that name.
+        """
         return self.units[self.index(name)] if self.units else ""
 
     def to_dict(self) -> dict[str, Any]:
@@ -205,6 +300,21 @@ def check_clipping(data: TimeData, *, min_run: int = 3, rtol: float = 1e-9) -> d
     (a saturated amplifier or ADC holds the rail) while at least 10 % of its samples lie strictly between the two
     extremes; a smooth signal touches its extremes at isolated samples only. Signals that live on their extremes by
     design - two-level PRBS or square waves, an impact force resting at zero between hits - are not flagged.
+
+    Parameters
+    ----------
+    data : TimeData
+        The channels to check.
+    min_run : int
+        Consecutive samples at an extreme that count as clipping.
+    rtol : float
+        Relative tolerance (of the channel's range) for a sample to be at an extreme.
+
+    Returns
+    -------
+    dict
+        ``{channel: fraction of samples at an extreme}`` of the flagged channels; one
+        :class:`~cappe.exceptions.DataWarning` names them.
 
     Examples
     --------

@@ -15,7 +15,17 @@ __all__ = ["ZeroPoleGainModel", "zpk"]
 
 @dataclass(frozen=True)
 class ZeroPoleGainModel:
-    """``G(s) = gain * prod(s - zeros) / prod(s - poles)`` (rad/s)."""
+    """``G(s) = gain * prod(s - zeros) / prod(s - poles)`` (rad/s).
+
+    Attributes
+    ----------
+    zeros, poles : ndarray of complex
+        Zeros and poles in rad/s.
+    gain : float
+        Leading coefficient ratio (output unit per input unit times s^(n_poles - n_zeros)).
+    input, output : str
+        Channel names (may be empty).
+    """
 
     zeros: NDArray[np.complex128]
     poles: NDArray[np.complex128]
@@ -42,7 +52,17 @@ class ZeroPoleGainModel:
 
 
 def zpk(tf: TransferFunctionModel) -> ZeroPoleGainModel:
-    """Zero-pole-gain form of a (float or exact) transfer function."""
+    """Zero-pole-gain form of a (float or exact) transfer function.
+
+    Parameters
+    ----------
+    tf : TransferFunctionModel
+        The transfer function (s in rad/s).
+
+    Returns
+    -------
+    ZeroPoleGainModel
+    """
     num, den = tf.float_coefficients()
     num = np.trim_zeros(num, "f")
     zeros = np.roots(num) if num.size > 1 else np.zeros(0, complex)
