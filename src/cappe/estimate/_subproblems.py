@@ -382,6 +382,18 @@ def select_stiffness(
     names searched in at least one subproblem where fewer than half of the runs ended at a bound
     (:meth:`StiffnessChoice.to_dict`).
 
+    Parameters
+    ----------
+    subproblems : sequence of SubproblemResult
+        The mode-position subproblems with their runs' final values (SI).
+    names : sequence of str
+        The modal unknowns to select.
+
+    Returns
+    -------
+    dict
+        As above; values in SI units.
+
     Examples
     --------
     >>> a = SubproblemResult(1, {"z": 0.0}, ("k",), np.array([[1.0], [1.2], [0.8]]), np.zeros(3), 1, 0.0)
