@@ -7,10 +7,9 @@ import sys
 import warnings
 from typing import Any
 
-import numpy as np
-
 from cappe.cli._common import UsageError, add_output_options, emit, naming_file
 
+#: cappe.identify.BLACK_BOX_STRUCTURES, spelled out so that building the parser imports no numerical library
 STRUCTURES = ("arx", "armax", "oe", "bj")
 
 
@@ -40,18 +39,6 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.set_defaults(func=run)
 
 
-def _estimator(structure: str, n: int, nk: int) -> Any:
-    from cappe.identify import ARMAX, ARX, OE, BoxJenkins
-
-    if structure == "arx":
-        return ARX(n, n, nk)
-    if structure == "armax":
-        return ARMAX(n, n, n, nk)
-    if structure == "oe":
-        return OE(n, n, nk)
-    return BoxJenkins(n, n, n, n, nk)
-
-
 def _count_or_auto(text: str | None, option: str, what: str) -> int | None:
     """``auto`` (or the option not given) -> None, else an integer >= 1."""
     if text is None or text == "auto":
@@ -66,28 +53,9 @@ def _count_or_auto(text: str | None, option: str, what: str) -> int | None:
     return n
 
 
-def _pairs(values: Any) -> list[list[float]]:
-    v = np.asarray(values, dtype=complex)
-    v = v[np.lexsort((v.imag, np.abs(v)))]
-    return [[float(z.real), float(z.imag)] for z in v]
-
-
-def _orders(model: Any) -> dict[str, Any]:
-    """The polynomial orders and delays of a fitted model (its settings without the iteration limits)."""
-    return {k: v for k, v in model.get_params().items() if k not in ("max_iter", "tol")}
-
-
-def _fit_quality(model: Any, data: Any) -> dict[str, Any]:
-    """NRMSE fit in % of the simulated output, or of the one-step prediction when the model is unstable."""
-    stable = bool(np.all(np.abs(model.poles()) < 1.0))
-    horizon = float("inf") if stable else 1.0
-    return {"fit_percent": model.fit_percent(data, horizon), "fit_horizon": "simulation" if stable else "one-step",
-            "stable": stable}
-
-
 @naming_file("data")
 def run(args: argparse.Namespace) -> int:
-    from cappe.identify import OE, prune, select_order
+    from cappe.identify import fit_black_box
     from cappe.io import read_time_data
 
     n = _count_or_auto(args.order, "--order", "a positive integer")
@@ -96,57 +64,30 @@ def run(args: argparse.Namespace) -> int:
         msg = "--refine, --plot and --cutoff act on a pruned model; add --prune N or --prune auto"
         raise UsageError(msg)
     data = read_time_data(args.data)
-    result: dict[str, Any] = {"format": "cappe.fit/1", "data": args.data, "structure": args.structure}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        if n is None:
-            selection = select_order(data, inputs=args.input, output=args.output, structure=args.structure,
-                                     orders=range(1, args.max_order + 1), nk=args.nk, criterion=args.criterion)
-            model = selection.model
-            result["order_selection"] = selection.to_dict()
-        else:
-            model = _estimator(args.structure, n, args.nk).fit(data, inputs=args.input, output=args.output)
-        result["orders"] = _orders(model)
-        result["success"] = bool(model.success_)
-        result.update(_fit_quality(model, data))
-        result["loss"] = float(model.loss_)
-        tfs, poles, modes = [], model.continuous_poles(), model.modal_parameters()
-        if args.prune is not None:
-            pruned = [
-                prune(model, input=name, n_modes=prune_to, min_peak=0.01 if prune_to is None else None,
-                      cutoff=args.cutoff, max_damping=args.max_damping)
-                for name in args.input
-            ]
-            result["pruning"] = {name: p.to_dict() for name, p in zip(args.input, pruned, strict=True)}
-            tfs = [p.transfer_function for p in pruned]
-            poles = np.array([r.value for r in pruned[0].poles], dtype=complex)
-            modes = pruned[0].modes
-            if args.plot:
-                from cappe.report import pruning_plot
+        fit = fit_black_box(
+            data, inputs=args.input, output=args.output, structure=args.structure,
+            order="auto" if n is None else n, criterion=args.criterion, max_order=args.max_order, nk=args.nk,
+            prune=None if args.prune is None else ("auto" if prune_to is None else prune_to),
+            cutoff=args.cutoff, max_damping=args.max_damping, refine=args.refine,
+        )
+        result: dict[str, Any] = {"format": "cappe.fit/1", "data": args.data, **fit.to_dict()}
+        if args.plot:
+            from cappe.report import pruning_plot
 
-                orders = ", ".join(f"{k}={v}" for k, v in result["orders"].items())
-                pruning_plot(pruned[0], args.plot, f"{args.output}/{args.input[0]}: {args.structure.upper()} "
-                             f"({orders}) pruned to {modes.n_modes} mode(s)")
-                result["plot"] = args.plot
-            if args.refine:
-                order = 2 * modes.n_modes + int(np.sum(np.abs(poles.imag) == 0))
-                refined = OE(order, order, args.nk).fit(data, inputs=args.input, output=args.output)
-                result["refined"] = {"orders": _orders(refined), "success": bool(refined.success_),
-                                     **_fit_quality(refined, data)}
-                model, modes, poles = refined, refined.modal_parameters(), refined.continuous_poles()
-                tfs = [refined.to_transfer_function(name, negative_real="reflect") for name in args.input]
-        if not tfs:
-            tfs = [model.to_transfer_function(name, negative_real="reflect") for name in args.input]
+            orders = ", ".join(f"{k}={v}" for k, v in fit.orders.items())
+            pruned = fit.pruned[0]
+            pruning_plot(pruned, args.plot, f"{args.output}/{args.input[0]}: {args.structure.upper()} "
+                         f"({orders}) pruned to {pruned.modes.n_modes} mode(s)")
+            items = list(result.items())  # "plot" right after "pruning", as ever
+            items.insert(list(result).index("pruning") + 1, ("plot", args.plot))
+            result = dict(items)
     warned = [str(w.message) for w in caught]
     for message in warned:
         print(f"cappe: warning: {message}", file=sys.stderr)
-    first = tfs[0].to_dict()
-    result.update(first)
-    result["transfer_functions"] = [tf.to_dict() for tf in tfs]
-    result["poles"] = _pairs(poles)
-    result["modes"] = modes.to_dict()["modes"]
     result["warnings"] = warned
-    emit(args, result, _text(args, result, modes))
+    emit(args, result, _text(args, result, fit.modes))
     return 0
 
 

@@ -2,6 +2,12 @@
 OE, BJ) with order selection and pruning, frequency-domain rational fits, modal extraction (LSCF / LSFD with
 stabilization diagrams) and rigid-body motion reconstruction."""
 
+from cappe.identify._black_box import (
+    BLACK_BOX_STRUCTURES,
+    BlackBoxFit,
+    FitQuality,
+    fit_black_box,
+)
 from cappe.identify._frf import (
     CoherenceSummary,
     ForceWindow,
@@ -80,14 +86,17 @@ from cappe.identify._signals import (
 __all__ = [
     "ARMAX",
     "ARX",
+    "BLACK_BOX_STRUCTURES",
     "NINE_ACCELEROMETER_LABELS",
     "OE",
     "RIGID_BODY_DOFS",
     "AccelerometerLayout",
+    "BlackBoxFit",
     "BodyGeometry",
     "BoxJenkins",
     "CoherenceSummary",
     "DiscreteTransferFunction",
+    "FitQuality",
     "ForceWindow",
     "Hits",
     "ModalExtraction",
@@ -112,6 +121,7 @@ __all__ = [
     "estimate_frf",
     "exponential_window_correction",
     "extract_modes",
+    "fit_black_box",
     "fit_rational",
     "impact",
     "integrate_acceleration",
