@@ -6,6 +6,7 @@ from benchmarks import (
     bench_automated,
     bench_estimate,
     bench_identify,
+    bench_lm,
     bench_matrices,
     bench_modal,
     bench_monitor,
@@ -27,6 +28,7 @@ def main() -> None:
     bench_pipeline.main()
     bench_automated.main()
     bench_subproblem.main()
+    bench_lm.main()
     bench_scaling.main()
     bench_startup.main()
 
