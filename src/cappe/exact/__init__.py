@@ -2,11 +2,13 @@
 
 from cappe.exact.rank import (
     InvertibilityResult,
+    PBHRanks,
     controllability_rank,
     exact_rank,
     float_rank,
     invertibility_matrix,
     observability_rank,
+    pbh_ranks,
     sain_massey,
 )
 from cappe.exact.rational import ExactStateSpace, exact_state_space, to_rational
@@ -15,6 +17,7 @@ from cappe.exact.transfer import exact_transfer_function, symbolic_transfer_func
 __all__ = [
     "ExactStateSpace",
     "InvertibilityResult",
+    "PBHRanks",
     "controllability_rank",
     "exact_rank",
     "exact_state_space",
@@ -22,6 +25,7 @@ __all__ = [
     "float_rank",
     "invertibility_matrix",
     "observability_rank",
+    "pbh_ranks",
     "sain_massey",
     "symbolic_transfer_function",
     "to_rational",
