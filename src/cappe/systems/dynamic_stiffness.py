@@ -147,7 +147,7 @@ def frf_lines(
     """
     w = np.asarray(omega, dtype=float)
     z = dynamic_stiffness(matrices, w)
-    b = np.asarray(inputs).astype(complex)
+    b = np.ascontiguousarray(inputs, dtype=complex)  # a transposed B in Fortran order slows the solve by half
     s = np.asarray(outputs)
     n = z.shape[-1]
     if derivatives is None and not left:
