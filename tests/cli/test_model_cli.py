@@ -359,3 +359,151 @@ def test_the_parser_is_built_without_the_numerical_libraries():
             "if m in sys.modules))")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
     assert out.strip() == "[]"
+
+
+# -- bad values: one located error or a finite answer, never a traceback or NaN (issue 18) ---------------------------
+CHAIN = """\
+format: cappe.model/1
+name: chain
+parameters:
+  - {{name: m1, value: {m1}, unit: kg, kind: mass}}
+  - {{name: m2, value: {m2}, unit: kg, kind: mass}}
+  - {{name: k, value: {k}, unit: N/m, kind: stiffness}}
+  - {{name: c, value: 30.0, unit: N s/m, kind: damping}}
+axes:
+  - {{name: z, positions: [0.1, 0.3]}}
+bodies:
+  - {{name: table, mass: m1, dofs: [x]}}
+  - {{name: slide, mass: m2, dofs: [x]}}
+elements:
+  - {{name: shoe, bodies: [ground, table], stiffness: {{x: '{kx}'}}, damping: {{x: c}}}}
+  - {{name: link, bodies: [table, slide], stiffness: {{x: k}}, damping: {{x: c}}}}
+inputs:
+  - {{name: F, body: table, direction: x}}
+outputs:
+  - {{name: d, quantity: displacement, body: table, direction: x}}
+"""
+
+MODEL_COMMANDS = {"matrices": [], "modes": [], "tf": ["--input", "F", "--output", "d"], "frf": ["--n", "20"]}
+
+
+def chain_file(tmp_path, *, m1="3.0", m2="3.0", k="2.0e6", kx="k"):
+    path = tmp_path / "model.yaml"
+    path.write_text(CHAIN.format(m1=m1, m2=m2, k=k, kx=kx))
+    return str(path)
+
+
+def _no_constant(token):
+    msg = f"{token} in the JSON output"
+    raise AssertionError(msg)
+
+
+@pytest.mark.parametrize("command", MODEL_COMMANDS)
+@pytest.mark.parametrize(
+    ("kx", "z", "value"),
+    [
+        ("1e6*sqrt(z)", "-0.2", "nan at z = -0.2"),
+        ("exp(700)*k", "0.1", "inf at k = 2e+06"),
+        ("k/z", "0", "inf at z = 0, k = 2e+06"),
+        ("k*(3 + log(z))", "0", "-inf at z = 0, k = 2e+06"),
+    ],
+)
+def test_an_expression_undefined_at_the_position_is_one_located_error(capsys, tmp_path, command, kx, z, value):
+    path = chain_file(tmp_path, kx=kx)
+    code, out, err = run(capsys, "model", command, path, "--position", f"z={z}", *MODEL_COMMANDS[command])
+    assert code == 1
+    assert out == ""
+    assert err == f"cappe: error: {path}, elements[0].stiffness.x: evaluates to {value}\n"
+
+
+#: exit codes of matrices, modes, tf and frf: 0 where double precision holds the answer (M of 1e-300 kg is exact;
+#: at 1e-300 kg the FRF is a direct solve, at 1e300 kg the poles' real parts are at round-off as for any lightly
+#: damped model), 1 where it does not (exact complex modes spread over 1e297, K's sum beyond 1.8e308, ...)
+EXTREMES = {
+    "mass-1e-300": ({"m1": "1e-300", "m2": "1e-300"}, (0, 1, 1, 0)),
+    "mass-1e300": ({"m1": "1e300", "m2": "1e300"}, (0, 1, 0, 0)),
+    "stiffness-1e308": ({"k": "1e308"}, (1, 1, 1, 1)),
+    "masses-1e-200-1e200": ({"m1": "1e-200", "m2": "1e200"}, (0, 1, 1, 1)),
+}
+
+
+@pytest.mark.parametrize("command", MODEL_COMMANDS)
+@pytest.mark.parametrize("case", EXTREMES)
+def test_extreme_values_give_finite_numbers_or_one_located_error(capsys, tmp_path, command, case):
+    values, codes = EXTREMES[case]
+    path = chain_file(tmp_path, **values)
+    code, out, err = run(capsys, "model", command, path, "--json", *MODEL_COMMANDS[command])
+    assert code == codes[list(MODEL_COMMANDS).index(command)]
+    if code == 0:
+        assert err == ""
+        json.loads(out, parse_constant=_no_constant)  # no NaN, Infinity or -Infinity
+    else:
+        assert out == ""
+        # the file, and the entry: a body (with its DOF), an element's value, or the transfer function
+        entry = r"(, bodies\[\d\] \(\w+\.x\)|, elements\[\d\]\.stiffness\.x|: transfer function d/F)"
+        assert re.fullmatch(rf"cappe: error: {re.escape(path)}{entry}: [^\n]+\n", err), err
+
+
+@pytest.mark.parametrize(
+    ("values", "command", "message"),
+    [
+        ({"k": "1e308"}, "matrices", "elements[0].stiffness.x: adds 1e+308 to the stiffness matrix entry [table.x, "
+                                     "table.x] at k = 1e+308, which sums to inf"),
+        ({"m1": "1e-200", "m2": "1e200"}, "modes", "bodies[1] (slide.x): a mode is taken for a rigid-body mode"),
+        ({"m1": "1e300", "m2": "1e300"}, "modes", "the exact complex modes cannot resolve 2 elastic mode(s)"),
+        ({"m1": "1e-300", "m2": "1e-300"}, "tf", "transfer function d/F: its coefficients cannot be computed in double "
+                                                 "precision"),
+    ],
+)
+def test_what_double_precision_cannot_hold_is_named(capsys, tmp_path, values, command, message):
+    path = chain_file(tmp_path, **values)
+    code, _, err = run(capsys, "model", command, path, *MODEL_COMMANDS[command])
+    assert code == 1
+    assert err.startswith(f"cappe: error: {path}")
+    assert message in err
+
+
+def test_extreme_masses_that_double_precision_holds_give_the_right_numbers(capsys, tmp_path):
+    # 1e300 kg: natural frequencies of 1e-148 Hz, the FRF's default band around them (not below the 0.1 Hz floor)
+    path = chain_file(tmp_path, m1="1e300", m2="1e300")
+    code, out, _ = run(capsys, "model", "modes", path, "--damping", "undamped", "--json")
+    assert code == 0
+    freqs = [mode["frequency"] for mode in json.loads(out)["modes"]]
+    want = np.sqrt(2e6 / 1e300 * (3 + np.array([-1.0, 1.0]) * np.sqrt(5)) / 2) / (2 * np.pi)  # equal masses, springs
+    np.testing.assert_allclose(freqs, want, rtol=1e-12)  # LAPACK's eigh on a 2 x 2 problem
+    code, out, _ = run(capsys, "model", "modes", path, "--damping", "undamped")
+    assert f"{want[0]:.4e}" in out  # not 0.000
+    code, out, _ = run(capsys, "model", "frf", path, "--json", "--n", "5")
+    assert code == 0
+    data = json.loads(out)
+    assert data["frequency"][0] == pytest.approx(want[0] / 10, rel=1e-9)
+
+
+def test_an_override_breaking_its_kind_names_the_parameter_entry(capsys, tmp_path):
+    code, out, err = run(capsys, "model", "matrices", "builtin:two-mass-rig", "--set", "m1=-1")
+    assert (code, out) == (1, "")
+    assert err == ("cappe: error: parameter 'm1' (mass) must be > 0; got -1.0 (builtin:two-mass-rig, parameters[0])\n")
+    params = tmp_path / "p.json"
+    params.write_text('{"c11": -2.0}')
+    code, out, err = run(capsys, "model", "modes", "builtin:two-mass-rig", "--params", str(params))
+    assert (code, out) == (1, "")
+    assert err == (f"cappe: error: {params}: parameter 'c11' (damping) must be >= 0; got -2.0 "
+                   "(builtin:two-mass-rig, parameters[5])\n")
+    # a value the rules allow but double precision cannot resolve: the body's entry, and where the value came from
+    params.write_text('{"m1": 1e300}')
+    code, out, err = run(capsys, "model", "modes", "builtin:two-mass-rig", "--params", str(params))
+    assert (code, out) == (1, "")
+    assert err.startswith("cappe: error: builtin:two-mass-rig, bodies[0] (mass1.x): a mode is taken for a rigid-body "
+                          "mode")
+    assert err.endswith(f" (parameter values from {params})\n")
+
+
+@pytest.mark.slow
+def test_tf_of_the_90_state_machine_tool_has_finite_coefficients(capsys):
+    # its numerator used to print as NaN with exit 0 (an overflowing product of 90 pole distances)
+    code, out, err = run(capsys, "model", "tf", "builtin:uniaxial-machine-tool", "--input", "Ftx", "--output", "atx",
+                         "--json")
+    assert (code, err) == (0, "")
+    data = json.loads(out, parse_constant=_no_constant)
+    assert len(data["denominator"]) == 91
+    assert data["numerator"][0] > 0

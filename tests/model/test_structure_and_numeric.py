@@ -288,9 +288,10 @@ def test_coefficients_in_product_form_and_generated_code_agree_with_sympy():
     np.testing.assert_allclose(only_fast(pb, (-1.0,))[:, 2], pb[:, 0] * pb[:, 1] * (4 / 3), rtol=1e-15)
 
 
-def test_a_position_factor_undefined_at_a_position_gives_inf_or_nan_as_numpy_does():
-    # product-form coefficients compute their axis factor once per position: with numpy's rules (inf, NaN and a
-    # RuntimeWarning), not Python's (ZeroDivisionError, complex results), like the generated code for arrays
+def test_a_position_factor_undefined_at_a_position_is_an_error_naming_the_entry():
+    # product-form coefficients compute their axis factor once per position: with numpy's rules (inf, NaN), not
+    # Python's (ZeroDivisionError, complex results), like the generated code for arrays; a NaN or inf is an error
+    # that names the entry and the position (issue 18), without numpy's RuntimeWarning
     b = StructureBuilder("undefined-factor")
     b.parameter("m", 1.0, kind="mass")
     b.parameter("k", 1.0e4, kind="stiffness")
@@ -300,7 +301,7 @@ def test_a_position_factor_undefined_at_a_position_gives_inf_or_nan_as_numpy_doe
     b.element("e2", bodies=("ground", "a"), at=[0, 0, 0], stiffness={"x": "k*(z + 3)**(1/3)"})
     nm = NumericModel(b.build())
     np.testing.assert_allclose(nm.matrices(None, {"z": 0.0})["K"], [[1.0e4 / 2 + 1.0e4 * 3 ** (1 / 3)]], rtol=1e-14)
-    with pytest.warns(RuntimeWarning):
-        assert np.isinf(nm.matrices(None, {"z": -2.0})["K"][0, 0])
-    with pytest.warns(RuntimeWarning):
-        assert np.isnan(nm.matrices(None, {"z": -4.0})["K"][0, 0])
+    with pytest.raises(ModelError, match=r"^elements\[0\]\.stiffness\.x: evaluates to inf at z = -2, k = 10000$"):
+        nm.matrices(None, {"z": -2.0})
+    with pytest.raises(ModelError, match=r"^elements\[1\]\.stiffness\.x: evaluates to nan at z = -4, k = 10000$"):
+        nm.matrices(None, {"z": -4.0})

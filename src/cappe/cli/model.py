@@ -3,13 +3,43 @@
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 import warnings
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from cappe.cli._common import ModelContext, UsageError, add_model_options, dominant_dofs, emit, names
+from cappe.exceptions import ModelError
+
+
+def _with_model(func: Callable[[argparse.Namespace, ModelContext], int]) -> Callable[[argparse.Namespace], int]:
+    """Run a command on the model, parameter values and position of its arguments.
+
+    An error found in the loaded model names the model file where the message does not (a representation or a
+    look-up by name does not know it), and, with a ``--params`` file, that file too: its values may be the cause (a
+    mass of 1e-300 kg), and the model entry alone does not say where they came from.
+    """
+
+    @functools.wraps(func)
+    def run(args: argparse.Namespace) -> int:
+        ctx = ModelContext(args)
+        try:
+            return func(args, ctx)
+        except ModelError as exc:
+            msg = str(exc)
+            source = ctx.structure.source
+            if source and source not in msg:
+                msg = f"{source}: {msg}"
+            if args.params and str(args.params) not in msg:
+                msg = f"{msg} (parameter values from {args.params})"
+            if msg == str(exc):
+                raise
+            raise ModelError(msg) from exc
+
+    return run
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -78,8 +108,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 
 
 # -- show -------------------------------------------------------------------------------------------
-def show(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def show(args: argparse.Namespace, ctx: ModelContext) -> int:
     s = ctx.structure
     data = {
         "name": s.name,
@@ -156,8 +186,8 @@ def show(args: argparse.Namespace) -> int:
 
 
 # -- matrices ---------------------------------------------------------------------------------------
-def matrices(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def matrices(args: argparse.Namespace, ctx: ModelContext) -> int:
     if args.symbolic:
         from cappe.model import derive
 
@@ -185,8 +215,8 @@ def matrices(args: argparse.Namespace) -> int:
 
 
 # -- modes ------------------------------------------------------------------------------------------
-def modes(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def modes(args: argparse.Namespace, ctx: ModelContext) -> int:
     system = ctx.system()
     result = system.modes(args.damping)
     data = result.to_dict()
@@ -209,12 +239,20 @@ def modes(args: argparse.Namespace) -> int:
     for r in range(result.n_modes):
         k = int(dominant[r])
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
-        lines.append(f"{r + 1:>4} {result.frequency[r]:>15.3f} {100 * result.damping[r]:>12.4f}  {result.dofs[k]}{tag}")
+        lines.append(f"{r + 1:>4} {_fixed(result.frequency[r], 3):>15} {_fixed(100 * result.damping[r], 4):>12}  "
+                     f"{result.dofs[k]}{tag}")
     lines.extend(notes)
     if args.modal_out:
         lines.append(_write_modal(ctx, args))
     emit(args, data, "\n".join(lines))
     return 0
+
+
+def _fixed(value: float, decimals: int) -> str:
+    """``value`` with ``decimals`` decimals, or in exponent form where that would show no digit or dozens."""
+    if value != 0 and not 10.0 ** (-decimals) <= abs(value) < 1e9:
+        return f"{value:.{decimals + 1}e}"
+    return f"{value:.{decimals}f}"
 
 
 def _write_modal(ctx: ModelContext, args: argparse.Namespace) -> str:
@@ -272,8 +310,8 @@ def _poly_text(coefs: tuple[Any, ...], kind: str) -> str:
     return " + ".join(terms) if terms else "0"
 
 
-def tf(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def tf(args: argparse.Namespace, ctx: ModelContext) -> int:
     result = _transfer(ctx, args)
     num = _poly_text(result.numerator, result.kind)
     den = _poly_text(result.denominator, result.kind)
@@ -284,10 +322,10 @@ def tf(args: argparse.Namespace) -> int:
     return 0
 
 
-def zpk_cmd(args: argparse.Namespace) -> int:
+@_with_model
+def zpk_cmd(args: argparse.Namespace, ctx: ModelContext) -> int:
     from cappe.systems import zpk
 
-    ctx = ModelContext(args)
     if args.symbolic:
         msg = "zpk needs numbers; use --exact or plain float"
         raise UsageError(msg)
@@ -308,8 +346,8 @@ def zpk_cmd(args: argparse.Namespace) -> int:
 
 
 # -- ss ---------------------------------------------------------------------------------------------
-def ss(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def ss(args: argparse.Namespace, ctx: ModelContext) -> int:
     model = ctx.system().state_space(names(args.inputs), names(args.outputs))
     if args.dt is not None:
         model = model.discretize(args.dt, args.method)
@@ -330,13 +368,15 @@ def ss(args: argparse.Namespace) -> int:
 
 
 # -- frf --------------------------------------------------------------------------------------------
-def frf(args: argparse.Namespace) -> int:
-    ctx = ModelContext(args)
+@_with_model
+def frf(args: argparse.Namespace, ctx: ModelContext) -> int:
     system = ctx.system()
     undamped = system.modes("undamped").frequency
     elastic = undamped[undamped > 0]
     fmin = args.fmin if args.fmin is not None else (max(elastic.min() / 10, 0.1) if elastic.size else 1.0)
     fmax = args.fmax if args.fmax is not None else (elastic.max() * 2 if elastic.size else 1000.0)
+    if args.fmin is None and args.fmax is None and elastic.size and fmin >= fmax:
+        fmin = elastic.min() / 10  # every mode far below 0.1 Hz: the band around them, not the 0.1 Hz floor
     if not 0 < fmin < fmax:
         msg = f"need 0 < --fmin < --fmax; got {fmin:g} and {fmax:g}"
         raise UsageError(msg)
@@ -411,11 +451,11 @@ def _pbh_ranks(ss: Any, tol: float = 1e-8) -> dict[str, int]:
     return {"controllability_rank": ctrb, "observability_rank": obsv}
 
 
-def check(args: argparse.Namespace) -> int:
+@_with_model
+def check(args: argparse.Namespace, ctx: ModelContext) -> int:
     from cappe.exact import controllability_rank, exact_state_space, observability_rank, sain_massey
     from cappe.model import derive
 
-    ctx = ModelContext(args)
     system = ctx.system()
     lam, phi = system.undamped_modes()
     rigid = [r for r in range(lam.size) if lam[r] == 0]
@@ -423,8 +463,9 @@ def check(args: argparse.Namespace) -> int:
     for r in rigid:
         shape = phi[:, r] / np.abs(phi[:, r]).max()
         rigid_modes.append({d: round(float(v), 6) for d, v in zip(system.dofs, shape, strict=True) if abs(v) > 1e-9})
-    cond_m = float(np.linalg.cond(system.M))
-    cond_k = float(np.linalg.cond(system.K)) if not rigid else float("inf")
+    with np.errstate(all="ignore"):  # a condition number beyond double precision is inf, said as such
+        cond_m = float(np.linalg.cond(system.M))
+        cond_k = float(np.linalg.cond(system.K)) if not rigid else float("inf")
     ins = names(args.inputs) or list(ctx.numeric.input_names)
     outs = names(args.outputs) or list(ctx.numeric.output_names)
     for n in ins:
@@ -433,11 +474,12 @@ def check(args: argparse.Namespace) -> int:
         ctx.structure.output(n)
     n_states = 2 * system.n_dof
     exact = args.exact == "always" or (args.exact == "auto" and n_states <= EXACT_STATE_LIMIT)
-    pbh = _pbh_ranks(ctx.numeric.system(ctx.values, ctx.position).state_space(ins, outs))
+    with np.errstate(all="ignore"):
+        pbh = _pbh_ranks(ctx.numeric.system(ctx.values, ctx.position).state_space(ins, outs))
     data = {
         "valid": True,
         "n_dof": system.n_dof,
-        "condition": {"M": cond_m, "K": cond_k if np.isfinite(cond_k) else None},
+        "condition": {"M": cond_m if np.isfinite(cond_m) else None, "K": cond_k if np.isfinite(cond_k) else None},
         "rigid_body_modes": rigid_modes,
         "inputs": ins,
         "outputs": outs,

@@ -5,10 +5,16 @@ Each matrix is ``X(p, r) = sum_j f_j(p, r) * P_j(r)`` (see :mod:`cappe.model.sym
 vectorized evaluation of the coefficients and one matrix product (B, n_terms) @ (n_terms, n*n).
 Terms whose pattern itself depends on parameters (for instance an attachment point given by a length
 parameter) are evaluated per sample instead; ``is_affine`` tells whether any exist.
+
+A model that evaluates to NaN or inf (``sqrt(z)`` at a negative position, ``1/z`` at 0, a product beyond 1.8e308)
+raises a :class:`~cappe.exceptions.ModelError` that names the model file, the entry and the values, e.g.
+``model.yaml, elements[0].stiffness.x: evaluates to nan at z = -0.2``. Finding that costs the usual evaluation
+only numpy's floating-point traps; the entry is looked for once something is wrong.
 """
 
 from __future__ import annotations
 
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any, cast
@@ -26,6 +32,9 @@ from cappe.model.symbolic import MATRIX_NAMES, SymbolicModel, Term
 __all__ = ["DampingSources", "NumericModel", "compile_model"]
 
 Array = NDArray[np.float64]
+#: a coefficient in an error message: the terms it stands for, its expression, and what it is of them ("" or
+#: "the derivative with respect to k")
+_Column = tuple[tuple[str, ...], sp.Expr, str]
 ParamsLike = Mapping[str, float] | Sequence[float] | NDArray[np.floating[Any]] | None
 
 
@@ -34,6 +43,22 @@ class _MatrixPlan:
     affine_coefficients: list[sp.Expr]
     affine_patterns: list[sp.Matrix]
     residual: sp.Matrix | None
+    #: per affine coefficient, the terms (``Term.source``) it stands for
+    sources: list[tuple[str, ...]]
+
+
+class _NonFinite(Exception):  # noqa: N818 (internal signal, turned into a ModelError that names the entry)
+    """Generated code gave NaN or inf (``values``: the evaluated coefficients where known), or a function of the
+    model's expressions could not be evaluated (``cause``: its error, such as a bearing law beyond its range)."""
+
+    def __init__(self, values: Array | None = None, cause: Exception | None = None) -> None:
+        super().__init__("non-finite coefficient")
+        self.values = values
+        self.cause = cause
+
+
+#: what each matrix is called in messages
+_MATRIX_WORDS = {"M": "mass", "C": "viscous damping", "K": "stiffness", "G": "gyroscopic", "H": "hysteretic damping"}
 
 
 @dataclass(frozen=True)
@@ -151,7 +176,13 @@ class _Coefficients:
         self._slow_jac_func = sp.lambdify(all_symbols, derivatives, modules="numpy", cse=True)
 
     def jacobian(self, pb: Array, pos: tuple[float, ...]) -> Array:
-        """The partial derivatives listed in :attr:`entries`, (B, n_entries), for a batch at one position."""
+        """The partial derivatives listed in :attr:`entries`, (B, n_entries), for a batch at one position.
+
+        Raises :class:`_NonFinite` where one is NaN or inf (see :meth:`__call__`).
+        """
+        return _checked(self._jacobian, pb, pos)
+
+    def _jacobian(self, pb: Array, pos: tuple[float, ...]) -> Array:
         out = np.empty((pb.shape[0], len(self.entries)))
         fast = self._n_fast_entries
         if fast:
@@ -164,15 +195,29 @@ class _Coefficients:
     def _factors(self, pos: tuple[float, ...]) -> Array:
         cached = self._factor_cache.get(pos)
         if cached is None:
-            # numpy scalars: a factor undefined at this position gives inf or NaN (and numpy's warning) as the
-            # generated code does for arrays; Python floats would raise ZeroDivisionError or turn complex
-            cached = np.array(list(self._factor_func(*(np.float64(v) for v in pos))), dtype=float)
+            # numpy scalars: a factor undefined at this position gives inf or NaN as the generated code does for
+            # arrays; Python floats would raise ZeroDivisionError or turn complex. Checked once per position.
+            try:
+                with np.errstate(all="ignore"):
+                    cached = np.array(list(self._factor_func(*(np.float64(v) for v in pos))), dtype=float)
+            except (ValueError, ArithmeticError) as exc:  # a function of the model's expressions, out of its range
+                raise _NonFinite(cause=exc) from exc
+            if not np.isfinite(cached).all():
+                raise _NonFinite
             cached.setflags(write=False)
             self._factor_cache[pos] = cached
         return cached
 
     def __call__(self, pb: Array, pos: tuple[float, ...]) -> Array:
-        """The coefficients (B, n) for a batch of parameter vectors (B, n_params) at one position."""
+        """The coefficients (B, n) for a batch of parameter vectors (B, n_params) at one position.
+
+        Raises :class:`_NonFinite` where a coefficient is NaN or inf. On the usual path this costs only
+        numpy's floating-point traps (no pass over the result): finite parameters and axis factors give a
+        non-finite coefficient only through an overflow, invalid operation or division by zero, which trap.
+        """
+        return _checked(self._evaluate, pb, pos)
+
+    def _evaluate(self, pb: Array, pos: tuple[float, ...]) -> Array:
         if self._fast.size:
             ext = _with_ones(pb)
             # np.take lays the result out C-contiguous (ext[:, index] is column-major): consumers' BLAS products
@@ -189,6 +234,52 @@ class _Coefficients:
             for j, v in zip(self._slow, self._slow_func(*_arguments(pb, pos)), strict=True):
                 out[:, j] = v
         return out
+
+
+def _checked(evaluate: Any, pb: Array, pos: tuple[float, ...]) -> Array:
+    """``evaluate(pb, pos)`` with floating-point traps; a trap is confirmed on a second, untrapped evaluation
+    (generated code may compute a branch it then discards) and raises :class:`_NonFinite` with the values."""
+    try:
+        with np.errstate(over="raise", invalid="raise", divide="raise"):
+            return cast(Array, evaluate(pb, pos))
+    except FloatingPointError:
+        pass
+    except (ValueError, ArithmeticError) as exc:  # a function of the model's expressions, out of its range
+        raise _NonFinite(cause=exc) from exc
+    try:
+        with np.errstate(all="ignore"):
+            values = cast(Array, evaluate(pb, pos))
+    except (ValueError, ArithmeticError) as exc:
+        raise _NonFinite(cause=exc) from exc
+    if not np.isfinite(values).all():
+        raise _NonFinite(values)
+    return values
+
+
+def _scalars(pos: tuple[float, ...]) -> list[np.float64]:
+    """Axis positions as numpy scalars: generated code then follows numpy's rules (1/0 is inf, sqrt(-1) NaN)
+    instead of Python's (ZeroDivisionError, complex results)."""
+    return [np.float64(v) for v in pos]
+
+
+def _real(value: object) -> float:
+    """``value`` as a float; NaN where it is not a real number (a complex or infinite sympy result)."""
+    try:
+        number = complex(value)  # type: ignore[call-overload]
+    except (TypeError, ValueError, OverflowError):
+        return math.nan
+    return number.real if number.imag == 0 else math.nan
+
+
+def _shown(value: object) -> str:
+    """A value in a message: ``nan``, ``inf``, ``-inf``, a number, or a complex number said to be one."""
+    try:
+        number = complex(value)  # type: ignore[call-overload]
+    except (TypeError, ValueError, OverflowError):
+        return str(value)
+    if number.imag != 0:
+        return f"{number} (not a real number)"
+    return f"{number.real:.6g}"
 
 
 def _with_ones(pb: Array) -> Array:
@@ -222,7 +313,17 @@ def _product_form(expr: sp.Expr, index: Mapping[sp.Symbol, int],
 
 
 def compile_model(model: Structure | SymbolicModel) -> NumericModel:
-    """Compile a Structure (or its SymbolicModel) into a NumericModel."""
+    """Compile a Structure (or its SymbolicModel) into a NumericModel.
+
+    Parameters
+    ----------
+    model : Structure or SymbolicModel
+        The model description (derived symbolically first when a Structure).
+
+    Returns
+    -------
+    NumericModel
+    """
     return NumericModel(model)
 
 
@@ -231,6 +332,11 @@ class NumericModel:
 
     Parameter vectors follow ``parameter_names`` (all model parameters, in file order); a mapping of
     overrides by name is accepted wherever a vector is.
+
+    Parameters
+    ----------
+    model : Structure or SymbolicModel
+        The model description (derived symbolically first when a Structure).
 
     Examples
     --------
@@ -255,10 +361,20 @@ class NumericModel:
         self._plans = {name: self._plan(self.symbolic.terms[name]) for name in MATRIX_NAMES}
         coefficients: list[sp.Expr] = []
         self._slices: dict[str, slice] = {}
+        #: per coefficient, the terms it stands for (to name the model entry in an error)
+        self._coefficient_sources: list[tuple[str, ...]] = []
         for name in MATRIX_NAMES:
             start = len(coefficients)
             coefficients.extend(self._plans[name].affine_coefficients)
+            self._coefficient_sources.extend(self._plans[name].sources)
             self._slices[name] = slice(start, len(coefficients))
+        self._coefficient_expressions = coefficients
+        #: the coefficients that are an element's stiffness, damping or loss times stiffness: never negative
+        self._nonnegative = np.concatenate([np.arange(self._slices[name].start, self._slices[name].stop)
+                                            for name in ("K", "C", "H")]).astype(np.intp)
+        #: per DOF, the model entry of its body (for messages)
+        self._dof_entries = tuple(self._location(f"bodies[{i}]") for i, b in enumerate(self.structure.bodies)
+                                  for _ in b.dofs)
         all_symbols = self._param_symbols + self._axis_symbols
         self._n_coef = len(coefficients)
         self._coefficients = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
@@ -291,8 +407,11 @@ class NumericModel:
         self._sensor_matrix_cache: dict[tuple[tuple[str, ...], tuple[float, ...], bytes], tuple[tuple[str, ...],
                                                                                          Array]] = {}
         self._sensor_moves: dict[str, bool] = {}
+        self._entry_values: tuple[list[tuple[str, str, sp.Expr]], Any] | None = None
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
+        #: per position, the largest coefficient magnitude no assembled entry can overflow with
+        self._safe_coefficient: dict[tuple[float, ...], float] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
         self._jacobian_entries = np.array(self._coefficients.entries, dtype=np.intp).reshape(-1, 2)
         self._residual_derivative_funcs = {
@@ -330,6 +449,7 @@ class NumericModel:
         self.source_names = tuple(names)
         self.source_elements = tuple(elements)
         self._source_kinds = tuple(kinds)
+        self._source_expressions = coefficients
         self._source_coef = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
         # code for the rows' structural non-zeros only (an elongation row touches one or two bodies), scattered
         where = [(j * self.n_dof + k) for j, row in enumerate(rows) for k, v in enumerate(row) if v != 0]
@@ -348,6 +468,19 @@ class NumericModel:
         ``jacobian=False`` leaves out the coefficients' derivatives (a (B, n_sources, n_params) array that the
         damping ratios alone do not need).
 
+        Parameters
+        ----------
+        params : array (n_params,) or (B, n_params), mapping or None
+            Parameter vector(s) in ``parameter_names`` order (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+        jacobian : bool
+            Also the coefficients' derivatives by the parameters.
+
+        Returns
+        -------
+        DampingSources
+
         Examples
         --------
         >>> from cappe.model import load_model
@@ -359,11 +492,18 @@ class NumericModel:
         pb = p if p.ndim == 2 else p[None, :]
         pos = self.position_vector(position)
         n_b, n_s, n = pb.shape[0], len(self.source_names), self.n_dof
-        coef = self._source_coef(pb, pos)
+        try:
+            coef = self._source_coef(pb, pos)
+        except _NonFinite as exc:
+            raise self._nonfinite_error(pb, pos, exc.values, self._source_columns(), exc.cause) from None
         jac = np.zeros((n_b, n_s, pb.shape[1])) if jacobian else None
         if jac is not None and self._source_jac_entries.size:
             source, parameter = self._source_jac_entries.T
-            jac[:, source, parameter] = self._source_coef.jacobian(pb, pos)
+            try:
+                jac[:, source, parameter] = self._source_coef.jacobian(pb, pos)
+            except _NonFinite as exc:
+                derivatives = self._derivative_columns(self._source_coef.entries, self._source_columns())
+                raise self._nonfinite_error(pb, pos, exc.values, derivatives, exc.cause) from None
         rows: Array
         if self._source_rows_per_sample:
             rows = np.empty((n_b, n_s, n))
@@ -382,12 +522,16 @@ class NumericModel:
         """The sources' elongation rows (n_sources, n_dof) at one parameter vector and position."""
         rows = np.zeros(len(self.source_names) * self.n_dof)
         if self._source_row_where.size:
-            rows[self._source_row_where] = np.asarray(self._source_rows(*p, *pos), dtype=float)
+            with np.errstate(all="ignore"):
+                rows[self._source_row_where] = np.asarray(self._source_rows(*p, *_scalars(pos)), dtype=float)
+            if not np.isfinite(rows).all():
+                raise self._nonfinite_error(p[None, :], pos)
         return rows.reshape(len(self.source_names), self.n_dof)
 
     def _plan(self, terms: list[Term]) -> _MatrixPlan:
         axis_set = set(self._axis_symbols)
         grouped: dict[sp.Expr, sp.Matrix] = {}
+        sources: dict[sp.Expr, tuple[str, ...]] = {}
         residual = None
         n = self.n_dof
         for term in terms:
@@ -395,14 +539,31 @@ class NumericModel:
             if pattern.free_symbols <= axis_set:
                 key = sp.sympify(term.coefficient)
                 grouped[key] = grouped[key] + pattern if key in grouped else pattern
+                sources[key] = (*sources.get(key, ()), term.source)
             else:
                 part = term.coefficient * pattern
                 residual = part if residual is None else residual + part
-        return _MatrixPlan(list(grouped), list(grouped.values()), residual)
+        return _MatrixPlan(list(grouped), list(grouped.values()), residual, [sources[key] for key in grouped])
 
     # -- argument handling ------------------------------------------------------------------------
     def vector(self, params: ParamsLike = None) -> Array:
-        """Parameter vector(s): ``(n_params,)`` or ``(B, n_params)`` from overrides, a vector or a batch."""
+        """Parameter vector(s): ``(n_params,)`` or ``(B, n_params)`` from overrides, a vector or a batch.
+
+        Parameters
+        ----------
+        params : array (n_params,) or (B, n_params), mapping or None
+            A vector or batch in ``parameter_names`` order (SI), overrides of the nominal values by name, or None
+            (the nominal vector).
+
+        Returns
+        -------
+        ndarray, shape (n_params,) or (B, n_params)
+
+        Raises
+        ------
+        ModelError
+            A name or the shape does not fit the model, or a value is not finite.
+        """
         if params is None:
             return self.nominal.copy()
         if isinstance(params, Mapping):
@@ -421,8 +582,214 @@ class NumericModel:
         return arr
 
     def position_vector(self, position: Mapping[str, float] | None = None) -> tuple[float, ...]:
+        """The axis coordinates in ``axis_names`` order (axes not given take the model's defaults).
+
+        Parameters
+        ----------
+        position : mapping axis -> float, optional
+            Axis values (m or rad).
+
+        Returns
+        -------
+        tuple of float
+
+        Raises
+        ------
+        ModelError
+            An axis is unknown or a value is not finite.
+        """
         resolved = self.structure.resolve_position(position)
         return tuple(resolved[a] for a in self.axis_names)
+
+    # -- NaN and inf: the slow path that names the model entry ------------------------------------
+    def _evaluate_coefficients(self, pb: Array, pos: tuple[float, ...]) -> Array:
+        try:
+            return self._coefficients(pb, pos)
+        except _NonFinite as exc:
+            raise self._nonfinite_error(pb, pos, exc.values, self._coefficient_columns(), exc.cause) from None
+
+    def _coefficient_columns(self) -> list[_Column]:
+        return [(sources, expr, "") for sources, expr in
+                zip(self._coefficient_sources, self._coefficient_expressions, strict=True)]
+
+    def _source_columns(self) -> list[_Column]:
+        return [((name,), expr, "") for name, expr in zip(self.source_names, self._source_expressions, strict=True)]
+
+    def _derivative_columns(self, entries: Sequence[tuple[int, int]], columns: Sequence[_Column]) -> list[_Column]:
+        """Columns of a coefficient Jacobian (its ``entries``: coefficient and parameter indices) for messages."""
+        return [(columns[j][0], sp.diff(columns[j][1], self._param_symbols[i]),
+                 f"the derivative with respect to {self.parameter_names[i]}") for j, i in entries]
+
+    def _location(self, where: str) -> str:
+        """``model.yaml, elements[0].stiffness.x``: the model file (where known) and the entry."""
+        source = self.structure.source
+        if not where:
+            return source or f"model '{self.structure.name}'"
+        return f"{source}, {where}" if source else where
+
+    def _assignments(self, expr: sp.Expr, p: Array, pos: tuple[float, ...]) -> str:
+        """`` at z = -0.2, k = 2e+06``: the axes and parameters ``expr`` uses, with their values ('' for none)."""
+        used = sp.sympify(expr).free_symbols
+        pairs = [(n, v) for n, sym, v in zip(self.axis_names, self._axis_symbols, pos, strict=True) if sym in used]
+        pairs += [(n, v) for n, sym, v in zip(self.parameter_names, self._param_symbols, p, strict=True)
+                  if sym in used]
+        return " at " + ", ".join(f"{n} = {float(v):.6g}" for n, v in pairs) if pairs else ""
+
+    def _term_entry(self, source: str) -> tuple[str, str]:
+        """The model entry of a term (``Term.source``, e.g. ``"shoe.kx"``) and what its coefficient is."""
+        name, _, tail = source.rpartition(".")
+        s = self.structure
+        if tail == "mass" or tail == "spin" or tail.startswith("I"):
+            here = f"bodies[{[b.name for b in s.bodies].index(name)}]"
+            if tail == "spin":
+                return f"{here}.spin", "polar inertia times spin speed"
+            return (f"{here}.mass", "the mass") if tail == "mass" else (f"{here}.inertia.{tail[1:]}", "the inertia")
+        here = f"elements[{[e.name for e in s.elements].index(name)}]"
+        if tail.startswith("eta"):
+            return f"{here}.loss.{tail[3:]}", "loss factor times stiffness"
+        label = "stiffness" if tail.startswith("k") else "damping"
+        return f"{here}.{label}.{tail[1:]}", f"the {label}"
+
+    def _entries(self) -> tuple[list[tuple[str, str, sp.Expr]], Any]:
+        """Every expression of the model, with its entry (``bodies[0].mass``) and a description where the entry
+        alone does not say what it is, and generated code evaluating them all (made when an error needs it)."""
+        if self._entry_values is None:
+            s = self.structure
+            found: list[tuple[str, str, sp.Expr]] = []
+
+            def vector(where: str, values: Sequence[sp.Expr], label: str = "") -> None:
+                for k, v in enumerate(values):
+                    if label:  # an entry without its own key (an attachment point given by 'points' or 'at')
+                        found.append((where, f"{label} ({'xyz'[k]})", v))
+                    else:
+                        found.append((f"{where}[{k}]", "", v))
+
+            for i, b in enumerate(s.bodies):
+                here = f"bodies[{i}]"
+                found.append((f"{here}.mass", "", b.mass))
+                for a, c in ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)):
+                    found.append((f"{here}.inertia.{'xyz'[a]}{'xyz'[c]}", "", b.inertia[a, c]))
+                vector(f"{here}.position", b.position)
+                vector(f"{here}.com", b.com)
+                if b.spin is not None:
+                    found.append((f"{here}.spin.speed", "", b.spin.speed))
+                    found.append((f"{here}.spin.polar_inertia", "", b.spin.polar_inertia))
+                    vector(f"{here}.spin.axis", b.spin.axis)
+            for i, e in enumerate(s.elements):
+                here = f"elements[{i}]"
+                for label, table in (("stiffness", e.stiffness), ("damping", e.damping), ("loss", e.loss)):
+                    found.extend((f"{here}.{label}.{d}", "", v) for d, v in table.items())
+                vector(here, e.point_a, f"its attachment point on {e.body_a!r}")
+                vector(here, e.point_b, f"its attachment point on {e.body_b!r}")
+                found.extend((here, "its local axes", v) for v in e.axes)
+            for i, inp in enumerate(s.inputs):
+                vector(f"inputs[{i}].point", inp.point)
+                vector(f"inputs[{i}].direction", inp.direction)
+            for i, out in enumerate(s.outputs):
+                if out.quantity != "elongation":
+                    vector(f"outputs[{i}].point", out.point)
+                    vector(f"outputs[{i}].direction", out.direction)
+            for i, sensor in enumerate(s.sensors):
+                vector(f"sensors[{i}].point", sensor.point)
+            func = sp.lambdify(self._param_symbols + self._axis_symbols, [expr for *_, expr in found],
+                               modules="numpy")
+            self._entry_values = (found, func)
+        return self._entry_values
+
+    def _first_nonfinite_entry(self, p: Array, pos: tuple[float, ...]) -> str | None:
+        """The first entry of the model (file order) that evaluates to NaN or inf, or cannot be evaluated (a
+        function of it out of its range), as a message; None if none."""
+        found, func = self._entries()
+        arguments = [np.float64(v) for v in p] + _scalars(pos)
+        try:
+            with np.errstate(all="ignore"):
+                values = list(func(*arguments))
+        except (ValueError, ArithmeticError):  # find the entry: each on its own
+            values = []
+            symbols = self._param_symbols + self._axis_symbols
+            for where, label, expr in found:
+                try:
+                    with np.errstate(all="ignore"):
+                        values.append(sp.lambdify(symbols, expr, modules="numpy")(*arguments))
+                except (ValueError, ArithmeticError) as exc:
+                    what = f"{label} " if label else ""
+                    return (f"{self._location(where)}: {what}cannot be evaluated{self._assignments(expr, p, pos)}: "
+                            f"{exc}")
+        for (where, label, expr), value in zip(found, values, strict=True):
+            if not math.isfinite(_real(value)):
+                what = f"{label} " if label else ""
+                return f"{self._location(where)}: {what}evaluates to {_shown(value)}{self._assignments(expr, p, pos)}"
+        return None
+
+    def _nonfinite_error(
+        self,
+        pb: Array | None,
+        pos: tuple[float, ...],
+        values: Array | None = None,
+        columns: Sequence[_Column] = (),
+        cause: Exception | None = None,
+    ) -> ModelError:
+        """The error for a NaN or inf in the model's evaluation at a batch ``pb`` (None: nominal) and a position.
+
+        Names the first entry of the model that evaluates to NaN or inf (or cannot be evaluated: ``cause``) at the
+        first offending sample, or, where every entry is finite, the coefficient (a product such as loss factor
+        times stiffness) that is not: ``values`` are the evaluated coefficients and ``columns`` say, per
+        coefficient, its terms and expression.
+        """
+        rows = np.atleast_2d(self.nominal if pb is None else pb)
+        if values is not None:
+            bad = np.flatnonzero(~np.isfinite(values).all(axis=1))
+            candidates = bad[:1] if bad.size else np.zeros(1, dtype=np.intp)
+        else:  # the sample is not known: the first whose entries say
+            candidates = np.arange(rows.shape[0])
+        message, b = None, int(candidates[0])
+        for k in candidates:
+            message = self._first_nonfinite_entry(rows[k], pos)
+            if message is not None:
+                b = int(k)
+                break
+        p = rows[b]
+        if message is None and values is not None and columns:
+            j = int(np.flatnonzero(~np.isfinite(values[b]))[0])
+            sources, expr, description = columns[j]
+            where, what = self._term_entry(sources[0])
+            what = f"{description} of {what}" if description else what
+            message = (f"{self._location(where)}: {what} evaluates to {_shown(values[b, j])}"
+                       f"{self._assignments(expr, p, pos)}")
+        if message is None:
+            at = ", ".join(f"{n} = {v:.6g}" for n, v in zip(self.axis_names, pos, strict=True))
+            what = f"cannot be evaluated: {cause}" if cause is not None else "evaluates to NaN or inf"
+            message = f"{self._location('')}: the model {what}{' at ' + at if at else ''}"
+        return ModelError(message)
+
+    def _matrix_error(self, name: str, mats: Array, pb: Array, pos: tuple[float, ...]) -> ModelError:
+        """The error for a matrix with NaN or inf entries although its coefficients are finite: an entry of the
+        model (a parameter-dependent point), or terms whose sum overflows."""
+        b = int(np.flatnonzero(~np.isfinite(mats.reshape(mats.shape[0], -1)).all(axis=1))[0])
+        p = pb[b]
+        message = self._first_nonfinite_entry(p, pos)
+        if message is not None:
+            return ModelError(message)
+        i, j = (int(v) for v in np.argwhere(~np.isfinite(mats[b]))[0])
+        symbols = self._param_symbols + self._axis_symbols
+        largest: tuple[float, Term] | None = None
+        for term in self.symbolic.terms[name]:
+            if (i, j) not in term.pattern:
+                continue
+            with np.errstate(all="ignore"):
+                value = _real(sp.lambdify(symbols, term.coefficient * term.pattern[(i, j)], modules="numpy")(
+                    *(np.float64(v) for v in p), *_scalars(pos)))
+            if largest is None or not abs(value) <= abs(largest[0]):
+                largest = (value, term)
+        entry = f"{_MATRIX_WORDS[name]} matrix entry [{self.dofs[i]}, {self.dofs[j]}]"
+        if largest is None:
+            return ModelError(f"{self._location('')}: the {entry} evaluates to {_shown(mats[b, i, j])}")
+        value, term = largest
+        where, _ = self._term_entry(term.source)
+        return ModelError(
+            f"{self._location(where)}: adds {value:.6g} to the {entry}{self._assignments(term.coefficient, p, pos)}, "
+            f"which sums to {_shown(mats[b, i, j])}: beyond double precision (about 1.8e308)"
+        )
 
     def _patterns(self, pos: tuple[float, ...]) -> dict[str, Array]:
         """Dense patterns (n_terms, n*n) of every matrix at one axis position (cached)."""
@@ -433,7 +800,10 @@ class NumericModel:
             for name, (n_terms, where, func) in self._pattern_funcs.items():
                 flat = np.zeros(n_terms * n * n)
                 if where.size:
-                    flat[where] = np.asarray(func(*pos), dtype=float)
+                    with np.errstate(all="ignore"):
+                        flat[where] = np.asarray(func(*_scalars(pos)), dtype=float)
+                    if not np.isfinite(flat).all():  # the geometry is undefined at this position
+                        raise self._nonfinite_error(None, pos)
                 cached[name] = flat.reshape(n_terms, n * n)
             self._pattern_cache[pos] = cached
         return cached
@@ -461,6 +831,18 @@ class NumericModel:
         The mass matrix of a rigid-body model is block-diagonal by body, so its Cholesky factor and inverse
         can be computed on the small blocks.
 
+        Parameters
+        ----------
+        name : {"M", "C", "K", "G", "H"}
+            The matrix.
+        position : mapping axis -> float, optional
+            Axis position (m or rad); the pattern may depend on it.
+
+        Returns
+        -------
+        list of ndarray of int
+            DOF indices of each block.
+
         Examples
         --------
         >>> from cappe.model import load_model
@@ -477,6 +859,20 @@ class NumericModel:
 
     def matrix_parameters(self, name: str) -> tuple[str, ...]:
         """The parameters matrix ``name`` depends on (in ``parameter_names`` order).
+
+        Parameters
+        ----------
+        name : {"M", "C", "K", "G", "H"}
+            The matrix.
+
+        Returns
+        -------
+        tuple of str
+
+        Raises
+        ------
+        ModelError
+            ``name`` is not a matrix of the model.
 
         Examples
         --------
@@ -504,6 +900,25 @@ class NumericModel:
         Only for matrices without parameter-dependent patterns; the modal engine reduces a mass matrix shared by
         a batch with it.
 
+        Parameters
+        ----------
+        names : sequence of str
+            Matrices among ``"M"``, ``"C"``, ``"K"``, ``"G"``, ``"H"``.
+        params : array (n_params,) or (B, n_params), mapping or None
+            Parameter vector(s) (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+
+        Returns
+        -------
+        dict
+            ``{name: (coefficients (B, n_terms), patterns (n_terms, n_dof, n_dof))}``.
+
+        Raises
+        ------
+        ModelError
+            A name is not a matrix, or its pattern depends on the parameters.
+
         Examples
         --------
         >>> from cappe.model import load_model
@@ -524,7 +939,7 @@ class NumericModel:
         pb = p if p.ndim == 2 else p[None, :]
         pos = self.position_vector(position)
         n = self.n_dof
-        coef = self._coefficients(pb, pos)
+        coef = self._evaluate_coefficients(pb, pos)
         out: dict[str, tuple[Array, Array]] = {}
         for name in names:
             patterns = self._patterns(pos)[name].reshape(-1, n, n)
@@ -539,14 +954,34 @@ class NumericModel:
         position: Mapping[str, float] | None = None,
         names: Sequence[str] = MATRIX_NAMES,
     ) -> dict[str, Array]:
-        """M, C, K, G, H at a parameter vector (n, n) or a batch (B, n, n), at one axis position."""
+        """M, C, K, G, H at a parameter vector (n, n) or a batch (B, n, n), at one axis position.
+
+        Parameters
+        ----------
+        params : array (n_params,) or (B, n_params), mapping or None
+            Parameter vector(s) (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+        names : sequence of str
+            The matrices wanted.
+
+        Returns
+        -------
+        dict
+            ``{name: ndarray (n_dof, n_dof) or (B, n_dof, n_dof)}``: mass (kg, kg m^2), viscous damping (N s/m),
+            stiffness (N/m), gyroscopic (N s/m) and hysteretic (N/m) matrices.
+        """
         p = self.vector(params)
+        return self._assemble(p, self.position_vector(position), names)[1]
+
+    def _assemble(self, p: Array, pos: tuple[float, ...], names: Sequence[str]) -> tuple[Array, dict[str, Array]]:
+        """The coefficients (B, n_coef) and the matrices of :meth:`matrices`."""
         batch = p.ndim == 2
         pb = p if batch else p[None, :]
-        pos = self.position_vector(position)
         n = self.n_dof
-        coef = self._coefficients(pb, pos)
+        coef = self._evaluate_coefficients(pb, pos)
         sparse = self._sparse_patterns(pos)
+        safe = batch or self._safe(coef, pos)
         out: dict[str, Array] = {}
         for name in names:
             nz, pattern = sparse[name]
@@ -556,10 +991,27 @@ class NumericModel:
             mats = flat.reshape(pb.shape[0], n, n)
             func = self._residual_funcs.get(name)
             if func is not None:
-                for b in range(pb.shape[0]):
-                    mats[b] += np.asarray(func(*pb[b], *pos), dtype=float)
+                with np.errstate(all="ignore"):
+                    for b in range(pb.shape[0]):
+                        mats[b] += np.asarray(func(*pb[b], *_scalars(pos)), dtype=float)
+            # finite coefficients can still sum past the largest double: checked for a single vector where its
+            # largest coefficient could (a batch's sums would cost a pass over B n^2 values; its coefficients are
+            # checked, and values near 1e308 that only overflow when added are not what a bounded design samples)
+            if (func is not None or (not batch and not safe)) and not np.isfinite(mats).all():
+                raise self._matrix_error(name, mats, pb, pos)
             out[name] = mats if batch else mats[0]
-        return out
+        return coef, out
+
+    def _safe(self, coef: Array, pos: tuple[float, ...]) -> bool:
+        """Whether no entry of the matrices assembled from one vector's coefficients can overflow: each entry is a
+        sum of at most (the largest row sum of |pattern|) times the largest |coefficient|."""
+        limit = self._safe_coefficient.get(pos)
+        if limit is None:
+            bound = max((float(abs(pattern).sum(axis=1).max()) for nz, pattern in self._sparse_patterns(pos).values()
+                         if nz.size), default=0.0)
+            limit = 1e300 / bound if bound > 0 else math.inf
+            self._safe_coefficient[pos] = limit
+        return not coef.size or float(np.abs(coef).max()) < limit
 
     def matrix_derivatives(
         self,
@@ -573,6 +1025,27 @@ class NumericModel:
 
         With ``parameters``, only with respect to those, in that order: (len(parameters), n, n) (on models with
         many parameters most of the work when few are wanted).
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+        names : sequence of str
+            The matrices wanted.
+        parameters : sequence of str, optional
+            Parameters to differentiate by (default all).
+
+        Returns
+        -------
+        dict
+            ``{name: ndarray (n_parameters, n_dof, n_dof)}``, per SI unit of each parameter.
+
+        Raises
+        ------
+        ModelError
+            ``params`` is a batch, or a name is unknown.
 
         Examples
         --------
@@ -602,7 +1075,11 @@ class NumericModel:
         jac = np.zeros((self._n_coef, n_p))
         if self._jacobian_entries.size:
             coefficient, parameter = self._jacobian_entries.T
-            jac[coefficient, parameter] = self._coefficients.jacobian(p[None, :], pos)[0]
+            try:
+                jac[coefficient, parameter] = self._coefficients.jacobian(p[None, :], pos)[0]
+            except _NonFinite as exc:
+                columns = self._derivative_columns(self._coefficients.entries, self._coefficient_columns())
+                raise self._nonfinite_error(p[None, :], pos, exc.values, columns, exc.cause) from None
         jac = jac[:, sel]
         patterns = self._patterns(pos)
         out: dict[str, Array] = {}
@@ -610,35 +1087,76 @@ class NumericModel:
             deriv = (jac[self._slices[name]].T @ patterns[name]).reshape(sel.size, n, n)
             func = self._residual_derivative_funcs.get(name)
             if func is not None:
-                mats = func(*p, *pos)
-                for k, column in enumerate(sel):
-                    deriv[k] += np.asarray(mats[column], dtype=float)
+                with np.errstate(all="ignore"):
+                    mats = func(*p, *_scalars(pos))
+                    for k, column in enumerate(sel):
+                        deriv[k] += np.asarray(mats[column], dtype=float)
+                if not np.isfinite(deriv).all():
+                    raise self._nonfinite_error(p[None, :], pos)
             out[name] = deriv
         return out
 
     def io_matrices(
         self, params: ParamsLike = None, position: Mapping[str, float] | None = None
     ) -> tuple[Array, Array]:
-        """Input matrix (n_dof, n_inputs) and displacement-level output matrix (n_outputs, n_dof)."""
+        """Input matrix (n_dof, n_inputs) and displacement-level output matrix (n_outputs, n_dof).
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+
+        Returns
+        -------
+        B : ndarray, shape (n_dof, n_inputs)
+            Generalized force per unit input.
+        S : ndarray, shape (n_outputs, n_dof)
+            Output rows (displacement level; each output's quantity says how to differentiate).
+
+        Raises
+        ------
+        ModelError
+            ``params`` is a batch.
+        """
         p = self.vector(params)
         if p.ndim != 1:
             msg = "io_matrices takes a single parameter vector"
             raise ModelError(msg)
         pos = self.position_vector(position)
-        b_mat, s_mat = self._io(*p, *pos)
-        b_arr = np.asarray(b_mat, dtype=float).reshape(self.n_dof, len(self.structure.inputs))
-        s_arr = np.asarray(s_mat, dtype=float).reshape(len(self.structure.outputs), self.n_dof)
+        with np.errstate(all="ignore"):
+            b_mat, s_mat = self._io(*p, *_scalars(pos))
+            b_arr = np.asarray(b_mat, dtype=float).reshape(self.n_dof, len(self.structure.inputs))
+            s_arr = np.asarray(s_mat, dtype=float).reshape(len(self.structure.outputs), self.n_dof)
+        if not (np.isfinite(b_arr).all() and np.isfinite(s_arr).all()):
+            raise self._nonfinite_error(p[None, :], pos)
         return b_arr, s_arr
 
     def system(self, params: ParamsLike = None, position: Mapping[str, float] | None = None) -> Any:
-        """The numeric second-order system (:class:`cappe.systems.MechanicalSystem`) at one parameter vector."""
+        """The numeric second-order system (:class:`cappe.systems.MechanicalSystem`) at one parameter vector.
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+
+        Returns
+        -------
+        MechanicalSystem
+        """
         from cappe.systems.mechanical import MechanicalSystem
 
         p = self.vector(params)
         if p.ndim != 1:
             msg = "system() takes a single parameter vector; use matrices() for batches"
             raise ModelError(msg)
-        mats = self.matrices(p, position)
+        pos = self.position_vector(position)
+        coef, mats = self._assemble(p, pos, MATRIX_NAMES)
+        if np.any(coef[0, self._nonnegative] < 0):
+            self._raise_negative(coef[0], p, pos)
         b_mat, s_mat = self.io_matrices(p, position)
         resolved = dict(zip(self.parameter_names, p.tolist(), strict=True))
         return MechanicalSystem(
@@ -655,8 +1173,19 @@ class NumericModel:
             output_quantities=self.output_quantities,
             name=self.structure.name,
             parameters=resolved,
-            position=dict(zip(self.axis_names, self.position_vector(position), strict=True)),
+            position=dict(zip(self.axis_names, pos, strict=True)),
+            source=self.structure.source,
+            dof_entries=self._dof_entries,
         )
+
+    def _raise_negative(self, coef: Array, p: Array, pos: tuple[float, ...]) -> None:
+        """Element stiffness, damping and loss must be >= 0 wherever they are evaluated (the model's rule, which
+        loading checks at the nominal values and listed positions only): name the first negative one."""
+        j = int(self._nonnegative[np.flatnonzero(coef[self._nonnegative] < 0)[0]])
+        where, what = self._term_entry(self._coefficient_sources[j][0])
+        assignments = self._assignments(self._coefficient_expressions[j], p, pos)
+        msg = f"{self._location(where)}: {what} evaluates to {coef[j]:.6g}{assignments}; it must be >= 0"
+        raise ModelError(msg)
 
     def sensor_matrix(
         self,
@@ -664,7 +1193,24 @@ class NumericModel:
         position: Mapping[str, float] | None = None,
         sensors: Sequence[str] | None = None,
     ) -> tuple[list[str], Array]:
-        """Rows mapping q to x, y, z displacements of sensor nodes: labels ``node:dir`` and (3 n_s, n_dof)."""
+        """Rows mapping q to x, y, z displacements of sensor nodes: labels ``node:dir`` and (3 n_s, n_dof).
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI), overrides by name, or None (nominal); sensor points may depend on it.
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+        sensors : sequence of str, optional
+            Sensor names (default all).
+
+        Returns
+        -------
+        labels : list of str
+            ``"node:x"``, ``"node:y"``, ``"node:z"`` per sensor.
+        rows : ndarray, shape (3 n_s, n_dof)
+            Sensor displacement per generalized coordinate.
+        """
         names = list(sensors) if sensors is not None else [s.name for s in self.structure.sensors]
         p = self.vector(params)
         pos = self.position_vector(position)
@@ -685,7 +1231,9 @@ class NumericModel:
                 for a, row in enumerate(self.symbolic.sensor_rows(name)):
                     labels.append(f"{name}:{'xyz'[a]}")
                     for j, v in row.items():
-                        rows[3 * k + a, j] = float(cast(sp.Expr, v).xreplace(subs))
+                        rows[3 * k + a, j] = _real(cast(sp.Expr, v).xreplace(subs))
+            if not np.isfinite(rows).all():
+                raise self._nonfinite_error(p[None, :] if p.ndim == 1 else p, pos)
             if len(self._sensor_matrix_cache) >= 64:
                 self._sensor_matrix_cache.clear()
             cached = (tuple(labels), rows)

@@ -70,6 +70,25 @@ class Parameter:
 
     ``unknown`` marks the parameters an identification should estimate; ``disturbable`` marks known
     parameters whose values are uncertain enough to perturb in robustness studies.
+
+    Attributes
+    ----------
+    name : str
+        Name used in expressions (``k11``, ``me1_kx``).
+    value : float
+        Nominal value in SI units.
+    unit : str
+        Unit text (``"N/m"``).
+    kind : str
+        One of :data:`PARAMETER_KINDS` (``"mass"``, ``"stiffness"`` ...); sets the sign rules.
+    bounds : (float, float) or None
+        Search bounds (SI).
+    unknown : bool
+        To be estimated.
+    disturbable : bool
+        Known but uncertain.
+    description : str
+        Free text.
     """
 
     name: str
@@ -95,7 +114,19 @@ class Parameter:
 
 @dataclass(frozen=True)
 class Axis:
-    """A machine axis whose coordinate (m or rad) reconfigures the structure."""
+    """A machine axis whose coordinate (m or rad) reconfigures the structure.
+
+    Attributes
+    ----------
+    name : str
+        Name used in expressions (``z``).
+    positions : tuple of float
+        Positions of interest (m or rad); the first is the default.
+    unit : str
+        ``"m"`` or ``"rad"``.
+    description : str
+        Free text.
+    """
 
     name: str
     positions: tuple[float, ...]
@@ -105,7 +136,17 @@ class Axis:
 
 @dataclass(frozen=True)
 class Spin:
-    """Steady spin of a body: unit axis ``axis`` (global), speed ``speed`` (rad/s), polar inertia (kg m^2)."""
+    """Steady spin of a body: unit axis ``axis`` (global), speed ``speed`` (rad/s), polar inertia (kg m^2).
+
+    Attributes
+    ----------
+    axis : tuple of 3 sympy expressions
+        Unit spin axis in global coordinates.
+    speed : sympy expression
+        Spin speed in rad/s.
+    polar_inertia : sympy expression
+        Polar moment of inertia about the axis in kg m^2.
+    """
 
     axis: Vector3
     speed: sp.Expr
@@ -114,7 +155,27 @@ class Spin:
 
 @dataclass(frozen=True)
 class Body:
-    """A rigid body: mass (kg), inertia tensor about its centre of mass (kg m^2), nominal origin, DOFs."""
+    """A rigid body: mass (kg), inertia tensor about its centre of mass (kg m^2), nominal origin, DOFs.
+
+    Attributes
+    ----------
+    name : str
+        Body name.
+    mass : sympy expression
+        Mass in kg.
+    inertia : sympy.ImmutableMatrix, shape (3, 3)
+        Inertia tensor about the centre of mass in kg m^2 (global axes).
+    position : tuple of 3 sympy expressions
+        Nominal origin in global coordinates (m; may depend on axes).
+    com : tuple of 3 sympy expressions
+        Centre of mass relative to the origin (m).
+    dofs : tuple of str
+        Active directions among ``x y z rx ry rz``.
+    spin : Spin or None
+        Steady spin (gyroscopic terms).
+    description : str
+        Free text.
+    """
 
     name: str
     mass: sp.Expr
@@ -128,7 +189,27 @@ class Body:
 
 @dataclass(frozen=True)
 class StiffnessDampingElement:
-    """A stiffness-damping element (SDE) joining body ``body_a`` to ``body_b`` (either may be ground)."""
+    """A stiffness-damping element (SDE) joining body ``body_a`` to ``body_b`` (either may be ground).
+
+    Attributes
+    ----------
+    name : str
+        Element name.
+    body_a, body_b : str
+        The joined bodies (``"ground"`` allowed).
+    point_a, point_b : tuple of 3 sympy expressions
+        Attachment points in each body's frame (m).
+    axes : sympy.ImmutableMatrix, shape (3, 3)
+        Local axes of the element (columns, global coordinates).
+    stiffness : mapping direction -> sympy expression
+        Stiffness per local direction (N/m, N m/rad).
+    damping : mapping direction -> sympy expression
+        Viscous damping per local direction (N s/m, N m s/rad).
+    loss : mapping direction -> sympy expression
+        Loss factor per local direction (hysteretic damping ``eta k``; dimensionless).
+    description : str
+        Free text.
+    """
 
     name: str
     body_a: str
@@ -150,7 +231,21 @@ class StiffnessDampingElement:
 
 @dataclass(frozen=True)
 class Input:
-    """A force (N) or moment (N m) acting on ``body`` at ``point`` along unit ``direction`` (global)."""
+    """A force (N) or moment (N m) acting on ``body`` at ``point`` along unit ``direction`` (global).
+
+    Attributes
+    ----------
+    name : str
+        Input name.
+    kind : {"force", "moment"}
+        What acts.
+    body : str
+        The body it acts on.
+    point : tuple of 3 sympy expressions
+        Point of action in the body frame (m).
+    direction : tuple of 3 sympy expressions
+        Unit direction (global).
+    """
 
     name: str
     kind: str
@@ -166,6 +261,25 @@ class Output:
     For ``quantity == "elongation"``, ``element`` and ``element_direction`` name the element and its
     local direction; otherwise ``body``, ``point`` and ``direction`` (unit, global) are used. A rotational
     motion output is given with ``rotation=True`` (rad, rad/s, rad/s^2).
+
+    Attributes
+    ----------
+    name : str
+        Output name.
+    quantity : str
+        One of :data:`QUANTITIES`.
+    body : str
+        The body moving (motion outputs).
+    point : tuple of 3 sympy expressions
+        The point in the body frame (m).
+    direction : tuple of 3 sympy expressions
+        Unit direction (global).
+    rotation : bool
+        The rotation about ``direction`` instead of the translation along it.
+    element : str
+        The element (elongation outputs).
+    element_direction : str
+        Its local direction (elongation outputs).
     """
 
     name: str
@@ -180,7 +294,17 @@ class Output:
 
 @dataclass(frozen=True)
 class Sensor:
-    """A named sensor node: a point on a body (body frame)."""
+    """A named sensor node: a point on a body (body frame).
+
+    Attributes
+    ----------
+    name : str
+        Node name; its channels are ``"name:x"``, ``"name:y"``, ``"name:z"``.
+    body : str
+        The body it sits on.
+    point : tuple of 3 sympy expressions
+        The point in the body frame (m).
+    """
 
     name: str
     body: str
@@ -189,7 +313,26 @@ class Sensor:
 
 @dataclass(frozen=True)
 class Structure:
-    """A validated, immutable description of a lumped-parameter machine structure."""
+    """A validated, immutable description of a lumped-parameter machine structure.
+
+    Made by :class:`StructureBuilder` or :func:`cappe.model.load_model`.
+
+    Attributes
+    ----------
+    name : str
+        Model name.
+    parameters : tuple of Parameter
+    axes : tuple of Axis
+    bodies : tuple of Body
+    elements : tuple of StiffnessDampingElement
+    inputs : tuple of Input
+    outputs : tuple of Output
+    sensors : tuple of Sensor
+    description : str
+        Free text.
+    source : str
+        The model file, for messages.
+    """
 
     name: str
     parameters: tuple[Parameter, ...]
@@ -222,21 +365,117 @@ class Structure:
         return sum(len(b.dofs) for b in self.bodies)
 
     def parameter(self, name: str) -> Parameter:
+        """The parameter of that name.
+
+        Parameters
+        ----------
+        name : str
+            Parameter name.
+
+        Returns
+        -------
+        Parameter
+
+        Raises
+        ------
+        ModelError
+            The model has no such parameter (the message lists the known ones).
+        """
         return self.parameters[self._lookup("parameters", name)]
 
     def body(self, name: str) -> Body:
+        """The body of that name.
+
+        Parameters
+        ----------
+        name : str
+            Body name.
+
+        Returns
+        -------
+        Body
+
+        Raises
+        ------
+        ModelError
+            The model has no such body.
+        """
         return self.bodies[self._lookup("bodies", name)]
 
     def element(self, name: str) -> StiffnessDampingElement:
+        """The element of that name.
+
+        Parameters
+        ----------
+        name : str
+            Element name.
+
+        Returns
+        -------
+        StiffnessDampingElement
+
+        Raises
+        ------
+        ModelError
+            The model has no such element.
+        """
         return self.elements[self._lookup("elements", name)]
 
     def input(self, name: str) -> Input:
+        """The input of that name.
+
+        Parameters
+        ----------
+        name : str
+            Input name.
+
+        Returns
+        -------
+        Input
+
+        Raises
+        ------
+        ModelError
+            The model has no such input.
+        """
         return self.inputs[self._lookup("inputs", name)]
 
     def output(self, name: str) -> Output:
+        """The output of that name.
+
+        Parameters
+        ----------
+        name : str
+            Output name.
+
+        Returns
+        -------
+        Output
+
+        Raises
+        ------
+        ModelError
+            The model has no such output.
+        """
         return self.outputs[self._lookup("outputs", name)]
 
     def sensor(self, name: str) -> Sensor:
+        """The sensor node of that name.
+
+        Parameters
+        ----------
+        name : str
+            Sensor name.
+
+        Returns
+        -------
+        Sensor
+
+        Raises
+        ------
+        ModelError
+            The model has no such sensor.
+        """
         return self.sensors[self._lookup("sensors", name)]
 
     def _lookup(self, group: str, name: str) -> int:
@@ -259,19 +498,46 @@ class Structure:
         return {a.name: (a.positions[0] if a.positions else 0.0) for a in self.axes}
 
     def resolve_parameters(self, values: Mapping[str, float] | None = None) -> dict[str, float]:
-        """Nominal values overridden by ``values``; unknown names and non-finite values are errors."""
+        """Nominal values overridden by ``values``.
+
+        Unknown names, non-finite values and values their kind forbids (a mass, inertia or stiffness below
+        zero or a mass or inertia of zero, a negative damping or loss factor) are errors naming the parameter's
+        entry in the model file. A stiffness of 0 is allowed here (an element taken out).
+
+        Parameters
+        ----------
+        values : mapping name -> float, optional
+            Overrides (SI).
+
+        Returns
+        -------
+        dict
+            ``{name: value}`` of every parameter (SI), in model order.
+
+        Raises
+        ------
+        ModelError
+            A name is unknown or a value breaks its kind's rule.
+        """
         out = self.nominal
         for name, value in (values or {}).items():
             if name not in out:
                 msg = f"unknown parameter {name!r} for model '{self.name}'; known: {', '.join(out)}"
                 raise ModelError(msg)
+            where = f"{self.source + ', ' if self.source else ''}parameters[{self._lookup('parameters', name)}]"
             try:
                 number = float(value)
             except (TypeError, ValueError) as exc:
-                msg = f"parameter {name!r} must be a number; got {value!r}"
+                msg = f"parameter {name!r} must be a number; got {value!r} ({where})"
                 raise ModelError(msg) from exc
             if not math.isfinite(number):
-                msg = f"parameter {name!r} must be finite; got {value!r}"
+                msg = f"parameter {name!r} must be finite; got {value!r} ({where})"
+                raise ModelError(msg)
+            kind = self.parameter(name).kind
+            if (kind in ("mass", "inertia") and number <= 0) or (
+                    kind in ("stiffness", "damping", "loss") and number < 0):
+                rule = "> 0" if kind in ("mass", "inertia") else ">= 0"
+                msg = f"parameter {name!r} ({kind}) must be {rule}; got {number!r} ({where})"
                 raise ModelError(msg)
             out[name] = number
         return out
@@ -283,6 +549,27 @@ class Structure:
         The disturbed model of paper 3.3: known parameters deliberately wrong by a fixed relative amount.
         Values are taken from ``values`` where given, else nominal; the result holds the disturbable ones only.
 
+        Parameters
+        ----------
+        fraction : float
+            Relative disturbance, 0 <= fraction < 1 (0.1: +-10 %).
+        rng : Generator
+            Source of the signs.
+        values : mapping name -> float, optional
+            Values (SI) to disturb instead of the nominal ones.
+
+        Returns
+        -------
+        dict
+            ``{name: disturbed value}`` of the disturbable parameters (SI).
+
+        Raises
+        ------
+        ModelError
+            ``fraction`` is out of range, or ``values`` breaks a parameter rule.
+
+        Examples
+        --------
         >>> from cappe.model import load_model
         >>> s = load_model("builtin:uniaxial-machine-tool")
         >>> d = s.disturbed(0.1, np.random.default_rng(0))
@@ -298,14 +585,38 @@ class Structure:
         return {n: base[n] * (1 + fraction * s) for n, s in zip(names, signs, strict=True)}
 
     def resolve_position(self, position: Mapping[str, float] | None = None) -> dict[str, float]:
-        """Default axis position overridden by ``position``; unknown axes are errors."""
+        """Default axis position overridden by ``position``; unknown axes are errors.
+
+        Parameters
+        ----------
+        position : mapping axis -> float, optional
+            Axis values (m or rad).
+
+        Returns
+        -------
+        dict
+            ``{axis: value}`` of every axis.
+
+        Raises
+        ------
+        ModelError
+            An axis is unknown or a value is not a finite number.
+        """
         out = self.default_position()
         for name, value in (position or {}).items():
             if name not in out:
                 known = ", ".join(out) or "none (this model has no axes)"
                 msg = f"unknown axis {name!r} for model '{self.name}'; known axes: {known}"
                 raise ModelError(msg)
-            out[name] = float(value)
+            try:
+                number = float(value)
+            except (TypeError, ValueError) as exc:
+                msg = f"axis {name!r} position must be a number; got {value!r}"
+                raise ModelError(msg) from exc
+            if not math.isfinite(number):
+                msg = f"axis {name!r} position must be finite; got {value!r}"
+                raise ModelError(msg)
+            out[name] = number
         return out
 
 
@@ -315,6 +626,15 @@ class StructureBuilder:
 
     Parameters and axes must be declared before the expressions that use them. ``where`` arguments are
     locations for error messages (the YAML loader passes ``"file.yaml, bodies[2]"``).
+
+    Parameters
+    ----------
+    name : str
+        Model name.
+    description : str
+        Free text.
+    source : str
+        The model file, named in error messages.
 
     Examples
     --------
@@ -448,7 +768,34 @@ class StructureBuilder:
         description: str = "",
         where: str | None = None,
     ) -> None:
-        """Declare a parameter with its nominal SI value."""
+        """Declare a parameter with its nominal SI value.
+
+        Parameters
+        ----------
+        name : str
+            Name used in expressions.
+        value : float
+            Nominal value (SI): > 0 for mass, inertia and stiffness, >= 0 for damping and loss.
+        unit : str
+            Unit text (``"N/m"``).
+        kind : str
+            One of :data:`PARAMETER_KINDS`.
+        bounds : (float, float), optional
+            Search bounds (SI), lo < hi, holding ``value``.
+        unknown : bool
+            To be estimated.
+        disturbable : bool
+            Known but uncertain (robustness studies).
+        description : str
+            Free text.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken, the kind unknown, or the value or bounds break a rule.
+        """
         where = self._here(where, "parameters", len(self._parameters))
         self._claim("parameters", name, where)
         if name in {a.name for a in self._axes}:
@@ -494,7 +841,26 @@ class StructureBuilder:
         description: str = "",
         where: str | None = None,
     ) -> None:
-        """Declare a machine axis and the positions at which the model is studied."""
+        """Declare a machine axis and the positions at which the model is studied.
+
+        Parameters
+        ----------
+        name : str
+            Name used in expressions.
+        positions : sequence of float
+            Positions of interest (m or rad); the first is the default.
+        unit : str
+            ``"m"`` or ``"rad"``.
+        description : str
+            Free text.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken or a position is not a finite number.
+        """
         where = self._here(where, "axes", len(self._axes))
         self._claim("axes", name, where)
         if name in {p.name for p in self._parameters}:
@@ -524,6 +890,33 @@ class StructureBuilder:
         ``inertia`` is the tensor about the centre of mass in the body frame: a 3x3 list, a mapping with
         keys ``xx yy zz xy xz yz`` (missing products are 0), or None for a point mass (only allowed when
         no rotational DOF is active).
+
+        Parameters
+        ----------
+        name : str
+            Body name.
+        mass : expression
+            Mass in kg (a number or an expression in parameters and axes).
+        inertia : list, mapping or None
+            Inertia tensor about the centre of mass in kg m^2 (see above).
+        position : sequence of 3 expressions
+            Nominal origin in global coordinates (m; may use axis coordinates).
+        com : sequence of 3 expressions
+            Centre of mass relative to the origin (m).
+        dofs : sequence of str
+            Active directions among ``x y z rx ry rz``.
+        spin : mapping, optional
+            Steady spin: ``speed`` (rad/s), ``axis`` (default ``"z"``) and ``polar_inertia`` (kg m^2, default from
+            ``inertia``).
+        description : str
+            Free text.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken or an entry breaks a rule.
         """
         where = self._here(where, "bodies", len(self._bodies))
         if name == GROUND:
@@ -663,6 +1056,34 @@ class StructureBuilder:
         to both bodies, converted to body frames with the bodies' nominal positions.
         ``axes`` optionally gives the local ``x`` and ``y`` axes (global frame); ``z = x × y``.
         ``stiffness``, ``damping`` and ``loss`` map directions (x y z rx ry rz) to expressions.
+
+        Parameters
+        ----------
+        name : str
+            Element name.
+        bodies : (str, str)
+            The joined bodies (``"ground"`` allowed for one).
+        points : sequence of two 3-vectors, optional
+            Attachment points in each body's frame (m).
+        at : 3-vector of expressions, optional
+            One global attachment location (m) instead of ``points``.
+        axes : mapping, optional
+            Local ``x`` and ``y`` axes (global frame).
+        stiffness : mapping direction -> expression, optional
+            Stiffness (N/m, N m/rad).
+        damping : mapping direction -> expression, optional
+            Viscous damping (N s/m, N m s/rad).
+        loss : mapping direction -> expression, optional
+            Loss factors (dimensionless; hysteretic damping ``eta k``).
+        description : str
+            Free text.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken or an entry breaks a rule.
         """
         where = self._here(where, "elements", len(self._elements))
         self._claim("elements", name, where)
@@ -763,7 +1184,28 @@ class StructureBuilder:
         kind: str = "force",
         where: str | None = None,
     ) -> None:
-        """Declare an input: a force (N) or moment (N m) on a body."""
+        """Declare an input: a force (N) or moment (N m) on a body.
+
+        Parameters
+        ----------
+        name : str
+            Input name.
+        body : str
+            The body it acts on (not ground).
+        point : 3-vector of expressions
+            Point of action in the body frame (m).
+        direction : str or 3-vector
+            ``"x"``, ``"-y"`` ... or a vector (global), normalized.
+        kind : {"force", "moment"}
+            What acts.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken, the kind or body unknown, or the direction zero.
+        """
         where = self._here(where, "inputs", len(self._inputs))
         self._claim("signals", name, where)
         if kind not in ("force", "moment"):
@@ -793,7 +1235,34 @@ class StructureBuilder:
         element: str | None = None,
         where: str | None = None,
     ) -> None:
-        """Declare an output: motion of a body point (or sensor) along a direction, or an elongation."""
+        """Declare an output: motion of a body point (or sensor) along a direction, or an elongation.
+
+        Parameters
+        ----------
+        name : str
+            Output name.
+        quantity : str
+            One of :data:`QUANTITIES`.
+        body : str, optional
+            The moving body (motion outputs without ``sensor``).
+        point : 3-vector of expressions
+            The point in the body frame (m).
+        direction : str or 3-vector
+            ``"x"``, ``"-y"`` ... or a vector (global); for an elongation, the element's local direction.
+        rotation : bool
+            The rotation about ``direction`` (rad) instead of the translation along it.
+        sensor : str, optional
+            A declared sensor node giving body and point.
+        element : str, optional
+            The element (elongation outputs).
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken, or the quantity, body, sensor, element or direction is unknown.
+        """
         where = self._here(where, "outputs", len(self._outputs))
         self._claim("signals", name, where)
         if quantity not in QUANTITIES:
@@ -840,7 +1309,24 @@ class StructureBuilder:
         )
 
     def sensor(self, name: str, *, body: str, point: object = (0, 0, 0), where: str | None = None) -> None:
-        """Declare a named sensor node on a body."""
+        """Declare a named sensor node on a body.
+
+        Parameters
+        ----------
+        name : str
+            Node name; its channels are ``"name:x"``, ``"name:y"``, ``"name:z"``.
+        body : str
+            The body it sits on (not ground).
+        point : 3-vector of expressions
+            The point in the body frame (m).
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken or the body unknown.
+        """
         where = self._here(where, "sensors", len(self._sensors))
         self._claim("sensors", name, where)
         body_name = self._require_body(body, f"{where}.body", allow_ground=False)

@@ -23,6 +23,17 @@ class TransferFunctionModel:
     ``kind`` is ``"float"`` (numpy floats), ``"exact"`` (sympy Rationals) or ``"symbolic"`` (sympy
     expressions in the parameter names). ``cancelled`` lists exact pole-zero factors removed (as sympy
     polynomials in s, printed), empty for float models.
+
+    Attributes
+    ----------
+    numerator, denominator : tuple
+        Coefficients in powers of s (rad/s), highest first; the denominator is monic.
+    input, output : str
+        Channel names.
+    kind : {"float", "exact", "symbolic"}
+        Type of the coefficients.
+    cancelled : tuple of str
+        Exact pole-zero factors removed.
     """
 
     numerator: tuple[Any, ...]
@@ -50,7 +61,18 @@ class TransferFunctionModel:
         return np.asarray(np.roots(num), dtype=complex) if num.size > 1 else np.zeros(0, complex)
 
     def evaluate(self, s: complex | NDArray[np.complexfloating[Any]]) -> Any:
-        """Value at complex frequency s (rad/s)."""
+        """Value at complex frequency s (rad/s).
+
+        Parameters
+        ----------
+        s : complex or ndarray of complex
+            Complex frequency in rad/s (``2j pi f`` for the frequency response at f Hz).
+
+        Returns
+        -------
+        complex or ndarray of complex
+            Output unit per input unit, shaped like ``s``.
+        """
         num, den = self.float_coefficients()
         return np.polyval(num, s) / np.polyval(den, s)
 
@@ -106,6 +128,24 @@ def transfer_function(
 
     Poles are eigenvalues of A, zeros the invariant zeros of the pencil, and the gain matches the
     response at a test frequency; this avoids the ill-conditioned characteristic-polynomial route.
+
+    Parameters
+    ----------
+    ss : StateSpaceModel
+        A continuous model.
+    input, output : str, optional
+        Input and output names (may be omitted where the model has one).
+
+    Returns
+    -------
+    TransferFunctionModel
+        Float coefficients, s in rad/s.
+
+    Raises
+    ------
+    ModelError
+        When a coefficient cannot be computed in double precision (many poles of large magnitude: the constant
+        term of the denominator is the product of all of them); never returns NaN or inf.
     """
     if ss.is_discrete:
         msg = "transfer_function takes a continuous model"
@@ -113,17 +153,34 @@ def transfer_function(
     i = _pick(ss.input_names, input, "input")
     o = _pick(ss.output_names, output, "output")
     a, b, c, d = ss.A, ss.B[:, [i]], ss.C[[o], :], ss.D[[o]][:, [i]]
-    poles = np.linalg.eigvals(a)
-    zeros = invariant_zeros(a, b, c, d)
-    scale = max(1.0, float(np.abs(poles).max()))
-    s0 = 1j * scale * 0.7310 + 0.1234 * scale
-    g0 = (c @ np.linalg.solve(s0 * np.eye(a.shape[0]) - a, b) + d)[0, 0]
-    k = g0 * np.prod(s0 - poles) / np.prod(s0 - zeros) if zeros.size else g0 * np.prod(s0 - poles)
-    den = np.real_if_close(np.poly(poles), tol=1e6)
-    num = np.real_if_close(k * np.poly(zeros), tol=1e6) if zeros.size else np.array([k])
+    what = f"transfer function {ss.output_names[o]}/{ss.input_names[i]}"
+    if not all(np.isfinite(m).all() for m in (a, b, c, d)):
+        msg = f"{what}: the state-space matrices are not finite"
+        raise ModelError(msg)
+    with np.errstate(all="ignore"):  # an overflow is reported below, not warned about
+        try:
+            poles = np.linalg.eigvals(a)
+            zeros = invariant_zeros(a, b, c, d)
+            scale = max(1.0, float(np.abs(poles).max()))
+            s0 = 1j * scale * 0.7310 + 0.1234 * scale
+            g0 = (c @ np.linalg.solve(s0 * np.eye(a.shape[0]) - a, b) + d)[0, 0]
+        except np.linalg.LinAlgError as exc:
+            msg = f"{what}: its poles, zeros and gain cannot be computed in double precision ({exc})"
+            raise ModelError(msg) from exc
+        k = g0 * np.prod(s0 - poles) / np.prod(s0 - zeros) if zeros.size else g0 * np.prod(s0 - poles)
+        if not np.isfinite(k):  # products of ~100 factors of 1e4 rad/s overflow: a sum of logarithms does not
+            k = g0 * np.exp(np.sum(np.log(s0 - poles)) - np.sum(np.log(s0 - zeros)))
+        den = np.real_if_close(np.poly(poles), tol=1e6)
+        num = np.real_if_close(k * np.poly(zeros), tol=1e6) if zeros.size else np.array([k])
     # poles and zeros come in conjugate pairs, so the coefficients are real up to round-off
     num_r = np.real(num)
     den_r = np.real(den)
+    if not (np.isfinite(num_r).all() and np.isfinite(den_r).all()):
+        largest = max(float(np.abs(poles).max()), 1.0)
+        msg = (f"{what}: its coefficients cannot be computed in double precision ({poles.size} poles of magnitude "
+               f"up to {largest:.3g} rad/s; the constant term of the denominator is the product of all of them): "
+               "use the state-space model (cappe model ss) or the exact rational coefficients (--exact)")
+        raise ModelError(msg)
     return TransferFunctionModel(
         tuple(float(x) for x in num_r), tuple(float(x) for x in den_r), ss.input_names[i], ss.output_names[o], "float"
     )
