@@ -314,19 +314,19 @@ def _krylov_ranks(a, b, c):
 
 
 def test_pbh_ranks_agree_with_krylov_ranks_on_small_systems():
-    from cappe.cli.model import _pbh_ranks
+    from cappe.exact import pbh_ranks
 
     ss = _oscillators([1.0, 2.0, 3.0])
     # force on oscillators 1 and 2 only, displacement of oscillator 3 only
     ss.B = np.array([[0, 0, 0, 1, 1, 0]], dtype=float).T
     ss.C = np.array([[0, 0, 1, 0, 0, 0]], dtype=float)
-    assert _pbh_ranks(ss) == {"controllability_rank": 4, "observability_rank": 2}
+    assert pbh_ranks(ss).to_dict() == {"controllability_rank": 4, "observability_rank": 2}
     assert _krylov_ranks(ss.A, ss.B, ss.C) == (4, 2)
     # two identical oscillators driven by one force: a repeated pole pair, rank 1 per eigenvalue
     ss = _oscillators([2.0, 2.0])
     ss.B = np.array([[0, 0, 1, 1]], dtype=float).T
     ss.C = np.array([[1, 0, 0, 0], [0, 1, 0, 0]], dtype=float)
-    assert _pbh_ranks(ss) == {"controllability_rank": 2, "observability_rank": 4}
+    assert pbh_ranks(ss).to_dict() == {"controllability_rank": 2, "observability_rank": 4}
     assert _krylov_ranks(ss.A, ss.B, ss.C) == (2, 4)
 
 

@@ -11,8 +11,6 @@ from collections.abc import Callable, Mapping
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ParamSpec
 
-import numpy as np
-
 from cappe.exceptions import DataError, ModelError
 
 if TYPE_CHECKING:
@@ -114,16 +112,6 @@ class ModelContext:
 
     def system(self) -> Any:
         return self.numeric.system(self.values, self.position)
-
-
-def dominant_dofs(mass: Any, shapes: Any) -> Any:
-    """Per mode, the DOF holding the largest share of its kinetic energy, ``Re(conj(phi_i) (M phi)_i)``.
-
-    Unlike the largest shape entry, this compares translations (m) and rotations (rad) in one unit (J).
-    """
-    phi = np.asarray(shapes)
-    energy = np.real(np.conj(phi) * (np.asarray(mass) @ phi))
-    return np.argmax(energy, axis=0)
 
 
 def emit(args: argparse.Namespace, data: Mapping[str, Any], text: str) -> None:

@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, dominant_dofs, emit, names
+from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
 from cappe.exceptions import ModelError
 
 
@@ -235,7 +235,7 @@ def modes(args: argparse.Namespace, ctx: ModelContext) -> int:
         f"{ctx.structure.name}: {result.n_modes} modes ({args.damping} damping)",
         f"{'mode':>4} {'frequency (Hz)':>15} {'damping (%)':>12}  dominant DOF (kinetic energy)",
     ]
-    dominant = dominant_dofs(system.M, result.shapes)
+    dominant = result.dominant_dofs(system.M)
     for r in range(result.n_modes):
         k = int(dominant[r])
         tag = " (rigid)" if result.rigid.size and result.rigid[r] else ""
@@ -403,111 +403,36 @@ def frf(args: argparse.Namespace, ctx: ModelContext) -> int:
 
 
 # -- check ------------------------------------------------------------------------------------------
-#: Largest state count for which ``model check --exact auto`` runs the exact rational rank tests.
+#: Largest state count for which ``model check --exact auto`` runs the exact rational rank tests:
+#: cappe.exact.EXACT_STATE_LIMIT, spelled out so that building the parser imports no sympy.
 EXACT_STATE_LIMIT = 24
-
-
-def _pbh_ranks(ss: Any, tol: float = 1e-8) -> dict[str, int]:
-    """Controllability and observability ranks by the Popov-Belevitch-Hautus eigenvector test, mode by mode.
-
-    Mode r (right eigenvector v, left eigenvector w of A) is uncontrollable when w^H B = 0 and unobservable when
-    C v = 0; here "0" is below ``tol`` relative to |w| |B| (|C| |v|), after balancing A (a similarity transform,
-    which leaves both ranks unchanged) so that the stiffness and identity blocks of a mechanical state matrix
-    do not differ by ten orders of magnitude, and with every input column and output row scaled to unit norm.
-    A repeated eigenvalue (symmetric rotors, mirror-image structures) counts the rank of W^H B (C V) over its
-    whole eigenspace. Unlike the rank of the Krylov matrix [B, AB, ...] this stays meaningful in double
-    precision for many states.
-    """
-    import scipy.linalg as sla
-
-    a, b, c = np.asarray(ss.A, dtype=float), np.asarray(ss.B, dtype=float), np.asarray(ss.C, dtype=float)
-    # unit inputs and outputs (displacement and acceleration rows differ by omega^2): ranks unchanged
-    b = b / np.where(np.linalg.norm(b, axis=0) > 0, np.linalg.norm(b, axis=0), 1.0)[None, :]
-    c = c / np.where(np.linalg.norm(c, axis=1) > 0, np.linalg.norm(c, axis=1), 1.0)[:, None]
-    a_bal, (scale, perm) = sla.matrix_balance(a, separate=True)
-    t = np.eye(a.shape[0])[:, perm] * scale[None, :]  # a_bal = inv(t) @ a @ t
-    b_bal = np.linalg.solve(t, b)
-    c_bal = c @ t
-    lam, w, v = sla.eig(a_bal, left=True, right=True)
-    w = w / np.linalg.norm(w, axis=0)
-    v = v / np.linalg.norm(v, axis=0)
-    nb = max(float(np.linalg.norm(b_bal)), 1e-300)
-    nc = max(float(np.linalg.norm(c_bal)), 1e-300)
-    # repeated eigenvalues (symmetric rotors, mirror-image structures): the test is on the whole eigenspace
-    order = np.argsort(lam.real + 1e-3 * lam.imag)
-    clusters: list[list[int]] = []
-    for k in order:
-        if clusters and abs(lam[k] - lam[clusters[-1][-1]]) <= 1e-7 * max(abs(lam[k]), 1.0):
-            clusters[-1].append(k)
-        else:
-            clusters.append([k])
-
-    def rank(matrix: Any, norm: float) -> int:
-        sv = np.linalg.svd(matrix, compute_uv=False)
-        return int(np.sum(sv > tol * norm))
-
-    ctrb = sum(rank(w[:, idx].conj().T @ b_bal, nb) for idx in clusters)
-    obsv = sum(rank(c_bal @ v[:, idx], nc) for idx in clusters)
-    return {"controllability_rank": ctrb, "observability_rank": obsv}
 
 
 @_with_model
 def check(args: argparse.Namespace, ctx: ModelContext) -> int:
-    from cappe.exact import controllability_rank, exact_state_space, observability_rank, sain_massey
-    from cappe.model import derive
+    from cappe.exact import check_model
 
-    system = ctx.system()
-    lam, phi = system.undamped_modes()
-    rigid = [r for r in range(lam.size) if lam[r] == 0]
-    rigid_modes = []
-    for r in rigid:
-        shape = phi[:, r] / np.abs(phi[:, r]).max()
-        rigid_modes.append({d: round(float(v), 6) for d, v in zip(system.dofs, shape, strict=True) if abs(v) > 1e-9})
-    with np.errstate(all="ignore"):  # a condition number beyond double precision is inf, said as such
-        cond_m = float(np.linalg.cond(system.M))
-        cond_k = float(np.linalg.cond(system.K)) if not rigid else float("inf")
-    ins = names(args.inputs) or list(ctx.numeric.input_names)
-    outs = names(args.outputs) or list(ctx.numeric.output_names)
-    for n in ins:
-        ctx.structure.input(n)
-    for n in outs:
-        ctx.structure.output(n)
-    n_states = 2 * system.n_dof
-    exact = args.exact == "always" or (args.exact == "auto" and n_states <= EXACT_STATE_LIMIT)
-    with np.errstate(all="ignore"):
-        pbh = _pbh_ranks(ctx.numeric.system(ctx.values, ctx.position).state_space(ins, outs))
-    data = {
-        "valid": True,
-        "n_dof": system.n_dof,
-        "condition": {"M": cond_m if np.isfinite(cond_m) else None, "K": cond_k if np.isfinite(cond_k) else None},
-        "rigid_body_modes": rigid_modes,
-        "inputs": ins,
-        "outputs": outs,
-        "n_states": n_states,
-        "pbh": pbh,
-        "exact": exact,
-    }
+    result = check_model(ctx.numeric, ctx.values, ctx.position, inputs=names(args.inputs),
+                         outputs=names(args.outputs), exact={"always": True, "never": False}.get(args.exact))
+    cond_m, cond_k = result.condition_M, result.condition_K
     lines = [
-        f"model {ctx.structure.name}: valid, {system.n_dof} DOF",
+        f"model {result.name}: valid, {result.n_dof} DOF",
         f"condition number: M {cond_m:.3g}, K " + (f"{cond_k:.3g}" if np.isfinite(cond_k) else "inf (singular)"),
     ]
-    if rigid_modes:
-        lines.append(f"{len(rigid_modes)} rigid-body mode(s) (unconstrained DOFs):")
-        lines.extend("  " + ", ".join(f"{d} {v:+.3f}" for d, v in m.items()) for m in rigid_modes)
+    if result.rigid_body_modes:
+        lines.append(f"{len(result.rigid_body_modes)} rigid-body mode(s) (unconstrained DOFs):")
+        lines.extend("  " + ", ".join(f"{d} {v:+.3f}" for d, v in m.items()) for m in result.rigid_body_modes)
     else:
         lines.append("no rigid-body modes: every DOF is constrained")
-    lines.append(f"inputs {', '.join(ins)} -> outputs {', '.join(outs)}: {n_states} states")
-    lines.append(f"  PBH test (double precision, per mode): controllability rank {pbh['controllability_rank']}, "
-                 f"observability rank {pbh['observability_rank']}")
-    if exact:
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore")
-            exact_ss = exact_state_space(derive(ctx.structure), ctx.values, ctx.position, ins, outs)
-        inv = sain_massey(exact_ss)
-        ctrb = controllability_rank(exact_ss)
-        obsv = observability_rank(exact_ss)
-        data.update({"invertibility": inv.to_dict(), "controllability_rank": ctrb, "observability_rank": obsv})
-        lines.append(f"  controllability rank {ctrb}, observability rank {obsv} (exact)")
+    lines.append(f"inputs {', '.join(result.inputs)} -> outputs {', '.join(result.outputs)}: "
+                 f"{result.n_states} states")
+    pbh = result.pbh
+    lines.append(f"  PBH test (double precision, per mode): controllability rank {pbh.controllability_rank}, "
+                 f"observability rank {pbh.observability_rank}")
+    inv = result.invertibility
+    if inv is not None:
+        lines.append(f"  controllability rank {result.controllability_rank}, observability rank "
+                     f"{result.observability_rank} (exact)")
         lines.append(
             f"  Sain-Massey M_n {inv.matrix_shape[0]}x{inv.matrix_shape[1]}: exact ranks "
             f"{inv.exact_ranks[1]} / {inv.exact_ranks[0]} -> "
@@ -519,9 +444,9 @@ def check(args: argparse.Namespace, ctx: ModelContext) -> int:
             f"{'; float rank is wrong here' if inv.invertible_float != inv.invertible_exact else ''})"
         )
     else:
-        lines.append(f"  exact rank tests skipped: {n_states} states > {EXACT_STATE_LIMIT} (rational Krylov and "
-                     "Sain-Massey matrices of this size take minutes to hours); --exact always forces them")
-    emit(args, data, "\n".join(lines))
+        lines.append(f"  exact rank tests skipped: {result.n_states} states > {EXACT_STATE_LIMIT} (rational Krylov "
+                     "and Sain-Massey matrices of this size take minutes to hours); --exact always forces them")
+    emit(args, result.to_dict(), "\n".join(lines))
     return 0
 
 
