@@ -122,21 +122,8 @@ def api_callables() -> dict[str, Any]:
 
 API = api_callables()
 
-#: Modules whose Parameters sections are written in the working tree but not committed yet: another change of
-#: issue 19 holds these files open. Their callables may fail here until those files are committed (xfail, not
-#: strict); then delete this tuple.
-PENDING = ("cappe/model/numeric.py", "cappe/model/structure.py", "cappe/systems/mechanical.py",
-           "cappe/systems/transfer.py")
-
-
 def _cases() -> list[Any]:
-    reason = "Parameters section not committed yet (file open in another change)"
-    cases = []
-    for name in sorted(API):
-        source = (inspect.getsourcefile(API[name]) or "").replace("\\", "/")
-        marks = [pytest.mark.xfail(strict=False, reason=reason)] if source.endswith(PENDING) else []
-        cases.append(pytest.param(name, id=name, marks=marks))
-    return cases
+    return [pytest.param(name, id=name) for name in sorted(API)]
 
 
 # -- the checker catches what it should ----------------------------------------------------------------------------
