@@ -15,6 +15,7 @@ import scipy.linalg as sla
 from numpy.typing import NDArray
 
 from cappe.exceptions import IllConditionedWarning, ModelError
+from cappe.systems.dynamic_stiffness import dynamic_stiffness, frf_lines
 from cappe.systems.frf import FRFData
 from cappe.systems.modal import ModalSet
 from cappe.systems.statespace import StateSpaceModel
@@ -469,35 +470,21 @@ class MechanicalSystem:
         ii = self._indices(inputs, self.input_names, "input")
         oo = self._indices(outputs, self.output_names, "output")
         w = 2 * np.pi * f
-        singular = np.zeros(f.size, dtype=bool)
+        mats = {"M": self.M, "C": self.C, "K": self.K, "G": self.G, "H": self.H}
+        orders = np.array([DERIVATIVE_ORDER[self.output_quantities[k]] for k in oo])
         with np.errstate(all="ignore"):  # an overflow is reported below, not warned about
-            z = (
-                (self.K + 1j * self.H)[None]
-                + 1j * w[:, None, None] * (self.C + self.G)[None]
-                - (w**2)[:, None, None] * self.M[None]
-            )
-            rhs = np.broadcast_to(self.B[:, ii].astype(complex), (f.size, self.n_dof, len(ii)))
             # a frequency so high that w^2 M is beyond double precision (looked for only where it may be)
             top = float(w.max(initial=0.0))
             bound = (float(np.abs(self.K).max() + np.abs(self.H).max()) + top * float(np.abs(self.C + self.G).max())
                      + top * top * float(np.abs(self.M).max()))
-            overflow = ~np.isfinite(z).all(axis=(1, 2)) if not bound < 1e300 else np.zeros(f.size, dtype=bool)
-            if overflow.any():
-                z[overflow] = np.eye(self.n_dof)
-            try:
-                x = np.linalg.solve(z, rhs)
-            except np.linalg.LinAlgError:
-                x = np.empty_like(rhs)
-                for k in range(f.size):
-                    try:
-                        x[k] = np.linalg.solve(z[k], rhs[k])
-                    except np.linalg.LinAlgError:
-                        x[k] = np.inf
-                        singular[k] = True
-            s = self.S[oo]
-            h = np.einsum("oi,fij->ojf", s, x)
-            orders = np.array([DERIVATIVE_ORDER[self.output_quantities[k]] for k in oo])
-            h = h * ((1j * w)[None, None, :] ** orders[:, None, None])
+            overflow: NDArray[np.bool_] = np.zeros(f.size, dtype=bool)
+            if not bound < 1e300:
+                overflow = np.asarray(~np.isfinite(dynamic_stiffness(mats, w)).all(axis=(1, 2)))
+            lines = frf_lines(mats, w[~overflow], self.B[:, ii], self.S[oo], orders=orders, singular="inf")
+            h = np.full((len(oo), len(ii), f.size), np.nan, dtype=complex)
+            h[..., ~overflow] = np.moveaxis(lines.H, 0, -1)
+            singular = np.zeros(f.size, dtype=bool)
+            singular[~overflow] = lines.singular
         for at in f[singular]:
             warnings.warn(
                 f"dynamic stiffness singular at {at:g} Hz (rigid-body mode or undamped resonance); FRF set to inf "
