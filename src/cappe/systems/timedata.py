@@ -66,7 +66,7 @@ class TimeData:
                 f"got {values.shape}"
             )
             raise DataError(msg)
-        unnamed = [i for i, c in enumerate(channels) if not c.strip()]
+        unnamed = [i for i, c in enumerate(channels) if not c]
         if unnamed:
             msg = f"channel names must not be empty; channel {unnamed[0]} has none"
             raise DataError(msg)
