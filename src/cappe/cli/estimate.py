@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import json
 import sys
 import warnings
@@ -101,6 +102,14 @@ def run(args: argparse.Namespace) -> int:
     start = read_parameters(args.start) if args.start else None
     cls = estimator_class(args.method)
     options = settings(args.setting)
+    if "position" in inspect.signature(cls.__init__).parameters:
+        options.setdefault("position", ctx.position)
+    elif args.position:  # the modal methods take each set's position from the reference data
+        msg = (
+            f"--position does not apply to method {args.method!r}: its reference data carry the axis position of "
+            "each set"
+        )
+        raise UsageError(msg)
     try:
         estimator = cls(ctx.numeric, names(args.unknowns), bounds=_bounds(args.bounds) or None, start=start,
                         values=ctx.values, rng=args.seed, **options)
