@@ -34,6 +34,7 @@ __all__ = [
     "MAX_POWER_DIGITS",
     "NAME_PATTERN",
     "as_expression",
+    "shown",
     "symbol",
 ]
 
@@ -144,12 +145,12 @@ def as_expression(value: object, names: Iterable[str], where: str) -> sp.Expr:
     unknown = sorted(s.name for s in expr.free_symbols if s.name not in allowed)
     if unknown:
         msg = (
-            f"expression {_shown(value)!r} uses unknown name(s) {', '.join(unknown)}; "
+            f"expression {shown(value)!r} uses unknown name(s) {', '.join(unknown)}; "
             f"only parameters and axes may appear ({where})"
         )
         raise ModelError(msg)
     if expr.has(sp.I) or expr.has(sp.zoo, sp.oo, -sp.oo, sp.nan):
-        msg = f"expression {_shown(value)!r} is not a finite real value ({where})"
+        msg = f"expression {shown(value)!r} is not a finite real value ({where})"
         raise ModelError(msg)
     return sp.sympify(expr)
 
@@ -301,11 +302,11 @@ class _Builder:
 
 
 def _reject(text: str, reason: str, where: str) -> NoReturn:
-    msg = f"expression {_shown(text)!r} {reason} ({where})"
+    msg = f"expression {shown(text)!r} {reason} ({where})"
     raise ModelError(msg)
 
 
-def _shown(value: object, limit: int = 80) -> str:
+def shown(value: object, limit: int = 80) -> str:
     """``value`` as text for a message, cut to ``limit`` characters."""
     text = value if isinstance(value, str) else str(value)
     return text if len(text) <= limit else text[: limit - 3] + "..."

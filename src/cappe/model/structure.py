@@ -36,7 +36,7 @@ import numpy as np
 import sympy as sp
 
 from cappe.exceptions import ModelError
-from cappe.model._expressions import NAME_PATTERN, as_expression, symbol
+from cappe.model._expressions import NAME_PATTERN, as_expression, shown, symbol
 
 __all__ = [
     "DIRECTIONS",
@@ -1371,15 +1371,10 @@ def _finite(value: object, what: str, where: str) -> float:
         msg = f"{what} must be within the floating-point range; got an integer beyond it ({where})"
         raise ModelError(msg) from exc
     except (TypeError, ValueError) as exc:
-        msg = f"{what} must be a number; got {_short(value)} ({where})"
+        msg = f"{what} must be a number; got {shown(repr(value))} ({where})"
         raise ModelError(msg) from exc
     if not math.isfinite(number):
         msg = f"{what} must be finite; got {value!r} ({where})"
         raise ModelError(msg)
     return number
 
-
-def _short(value: object, limit: int = 80) -> str:
-    """``repr(value)`` cut to ``limit`` characters for a message."""
-    text = repr(value)
-    return text if len(text) <= limit else text[: limit - 3] + "..."
