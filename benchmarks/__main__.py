@@ -15,6 +15,7 @@ from benchmarks import (
     bench_sobol,
     bench_startup,
     bench_subproblem,
+    bench_threads,
 )
 
 
@@ -31,6 +32,7 @@ def main() -> None:
     bench_lm.main()
     bench_scaling.main()
     bench_startup.main()
+    bench_threads.main()
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import re
 import subprocess
 import sys
 import threading
@@ -18,12 +19,12 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from threadpoolctl import threadpool_info
+from threadpoolctl import threadpool_info, threadpool_limits
 
 from cappe.estimate._automated import AutomatedIdentification
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, load_model
-from cappe.parallel import Executor, map_chunks, single_threaded_blas
+from cappe.parallel import Executor, blas_threads, command_blas_threads, map_chunks, single_threaded_blas
 
 BENCH = Path(__file__).parent / "data" / "bench-slide.yaml"
 POSITIONS = [{"z": -0.2}, {"z": 0.0}, {"z": 0.3}]
@@ -87,6 +88,38 @@ def test_blas_limit_is_restored_after_overlapping_threads():
 def _enter_and_leave() -> None:
     with single_threaded_blas():
         pass
+
+
+def test_blas_threads_sets_the_count_and_the_load_variables_and_restores_both(monkeypatch):
+    monkeypatch.setenv("OPENBLAS_NUM_THREADS", "7")
+    monkeypatch.delenv("MKL_NUM_THREADS", raising=False)
+    with threadpool_limits(limits=1, user_api="blas"):
+        with blas_threads(2):
+            assert set(_blas_threads()) == {2}
+            assert (os.environ["OPENBLAS_NUM_THREADS"], os.environ["MKL_NUM_THREADS"]) == ("2", "2")
+            with single_threaded_blas():  # an executor's map inside a command
+                assert set(_blas_threads()) == {1}
+            assert set(_blas_threads()) == {2}
+        assert set(_blas_threads()) == {1}
+        with blas_threads(None):  # 'auto': nothing changes
+            assert set(_blas_threads()) == {1}
+            assert os.environ["OPENBLAS_NUM_THREADS"] == "7"
+    assert os.environ["OPENBLAS_NUM_THREADS"] == "7"
+    assert "MKL_NUM_THREADS" not in os.environ
+    with pytest.raises(ValueError, match=r"limit must be a positive integer or None; got 0"), blas_threads(0):
+        pass
+
+
+@pytest.mark.parametrize(("value", "threads"), [(None, 1), ("", 1), ("3", 3), ("AUTO", None), (" auto ", None)])
+def test_command_blas_threads_reads_the_variable(value, threads):
+    assert command_blas_threads({} if value is None else {"CAPPE_BLAS_THREADS": value}) == threads
+
+
+@pytest.mark.parametrize("value", ["0", "-2", "2.0", "many"])
+def test_command_blas_threads_refuses_other_values(value):
+    with pytest.raises(ValueError, match=rf"CAPPE_BLAS_THREADS must be a positive number of threads or 'auto'; "
+                                         rf"got '{re.escape(value)}'"):
+        command_blas_threads({"CAPPE_BLAS_THREADS": value})
 
 
 @pytest.fixture(scope="module")

@@ -16,6 +16,10 @@ so results do not depend on the chunk size, the number of workers or where the c
   function is scattered once to every worker, chunks run as tasks. ``dask-jobqueue`` (HPC batch systems) and
   ``dask-kubernetes`` clusters expose such an address too.
 
+Commands (``cappe ...``) run their whole work under :func:`command_blas_threads`: one BLAS thread unless the
+environment variable ``CAPPE_BLAS_THREADS`` says otherwise (a number of threads, or ``auto`` for the BLAS
+library's own choice). Their work is many small linear-algebra calls, which OpenBLAS's threads only slow down.
+
 The first map also tunes glibc's allocator of this process to keep freed memory for reuse
 (:func:`retain_freed_memory`; set a ``MALLOC_*_`` variable to keep glibc's defaults).
 """
@@ -25,14 +29,24 @@ from __future__ import annotations
 import os
 import sys
 import threading
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from contextlib import contextmanager
 from typing import Any, TypeVar
 
 from threadpoolctl import ThreadpoolController
 
-__all__ = ["Executor", "chunk_slices", "map_chunks", "resolve_workers", "retain_freed_memory", "single_threaded_blas"]
+__all__ = [
+    "BLAS_THREADS_VARIABLE",
+    "Executor",
+    "blas_threads",
+    "chunk_slices",
+    "command_blas_threads",
+    "map_chunks",
+    "resolve_workers",
+    "retain_freed_memory",
+    "single_threaded_blas",
+]
 
 T = TypeVar("T")
 
@@ -127,6 +141,99 @@ def single_threaded_blas() -> Iterator[None]:
             if _USERS == 0 and _LIMITER is not None:
                 _LIMITER.restore_original_limits()
                 _LIMITER = None
+
+
+#: The environment variable that sets the BLAS threads of a ``cappe`` command: a positive number, or ``auto``
+#: (the BLAS library's own choice, usually one per core); unset or empty: 1.
+BLAS_THREADS_VARIABLE = "CAPPE_BLAS_THREADS"
+#: What the BLAS libraries read when they load: a library that a command loads after its limit was set (scipy's
+#: own OpenBLAS, imported on first use) starts with the command's thread count too.
+_BLAS_LOAD_VARIABLES = ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS")
+
+
+def command_blas_threads(environ: Mapping[str, str] | None = None) -> int | None:
+    """The BLAS threads a ``cappe`` command runs with, from ``CAPPE_BLAS_THREADS``: 1 by default, None for ``auto``.
+
+    A command does many small linear-algebra calls (FRFs and fits of a few dozen DOF, per measurement, sample or
+    frequency line); OpenBLAS's threads only add their synchronisation to each: ``cappe monitor ingest`` of 16
+    measurements took 22 s on two OpenBLAS threads and 7 s on one (2-core machine).
+
+    Parameters
+    ----------
+    environ : mapping of str to str, optional
+        The environment to read (default ``os.environ``).
+
+    Returns
+    -------
+    int or None
+        The number of threads, or None where the user asked for the BLAS library's own choice.
+
+    Raises
+    ------
+    ValueError
+        The variable is neither a positive integer nor ``auto``.
+
+    Examples
+    --------
+    >>> command_blas_threads({})
+    1
+    >>> command_blas_threads({"CAPPE_BLAS_THREADS": "4"}), command_blas_threads({"CAPPE_BLAS_THREADS": "auto"})
+    (4, None)
+    """
+    text = (os.environ if environ is None else environ).get(BLAS_THREADS_VARIABLE, "").strip()
+    if not text:
+        return 1
+    if text.lower() == "auto":
+        return None
+    if text.isascii() and text.isdigit() and int(text) >= 1:
+        return int(text)
+    msg = f"{BLAS_THREADS_VARIABLE} must be a positive number of threads or 'auto'; got {text!r}"
+    raise ValueError(msg)
+
+
+@contextmanager
+def blas_threads(limit: int | None) -> Iterator[None]:
+    """Run the block with BLAS on ``limit`` threads, also in BLAS libraries loaded inside it; None: as they are.
+
+    The libraries loaded now are limited through threadpoolctl (as :func:`single_threaded_blas`, which this
+    uses for one thread, so that the executors' own pinning nests inside); for those loaded later in the block
+    the block sets ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS`` and ``BLIS_NUM_THREADS``, which they read
+    when they load. The variables and the limits come back when the block ends; a library loaded inside keeps
+    the count it started with. Child processes started inside inherit the variables.
+
+    Parameters
+    ----------
+    limit : int or None
+        Threads per BLAS library (>= 1), or None to change nothing.
+
+    Examples
+    --------
+    >>> from threadpoolctl import threadpool_info
+    >>> with blas_threads(1):
+    ...     all(lib["num_threads"] == 1 for lib in threadpool_info() if lib["user_api"] == "blas")
+    True
+    """
+    if limit is None:
+        yield
+        return
+    if isinstance(limit, bool) or not isinstance(limit, int) or limit < 1:
+        msg = f"limit must be a positive integer or None; got {limit!r}"
+        raise ValueError(msg)
+    saved = {name: os.environ.get(name) for name in _BLAS_LOAD_VARIABLES}
+    os.environ.update(dict.fromkeys(_BLAS_LOAD_VARIABLES, str(limit)))
+    try:
+        if limit == 1:
+            with single_threaded_blas():
+                yield
+        else:
+            with ThreadpoolController().limit(limits=limit, user_api="blas"):
+                yield
+    finally:
+        for name, value in saved.items():
+            if value is None:
+                os.environ.pop(name, None)
+            else:
+                os.environ[name] = value
 
 
 _ALLOCATOR_TUNED = False

@@ -162,8 +162,17 @@ def naming_file(
 
 
 def run_guarded(func: Any, args: argparse.Namespace) -> int:
+    from cappe.parallel import blas_threads, command_blas_threads
+
     try:
-        return int(func(args) or EXIT_OK)
+        threads = command_blas_threads()
+    except ValueError as exc:
+        print(f"cappe: usage error: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    try:
+        # the whole command on one BLAS thread unless CAPPE_BLAS_THREADS says otherwise (see cappe.parallel)
+        with blas_threads(threads):
+            return int(func(args) or EXIT_OK)
     except UsageError as exc:
         print(f"cappe: usage error: {exc}", file=sys.stderr)
         return EXIT_USAGE
