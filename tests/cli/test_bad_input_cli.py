@@ -106,7 +106,8 @@ def test_bad_modal_reference_for_identify(tmp_path, capsys):
 def test_bad_time_data(tmp_path, capsys, content, command):
     path = tmp_path / "bad-run.csv"
     path.write_bytes(content)
-    _one_line_error(capsys, [command, path, "--input", "F1", "--output", "d1"], "bad-run.csv")
+    _one_line_error(capsys, [command, path, "--inputs", "F1", "--output" if command == "fit" else "--outputs", "d1"],
+                    "bad-run.csv")
 
 
 @pytest.mark.parametrize("content", FRF_CSV.values(), ids=FRF_CSV)
@@ -145,12 +146,12 @@ def test_errors_found_in_the_data_name_the_data_file(tmp_path, capsys):
     t = np.arange(64) / 64.0
     path = tmp_path / "run.csv"
     path.write_text("time,F,a\n" + "".join(f"{v:.17g},{np.sin(v):.17g},{np.cos(v):.17g}\n" for v in t))
-    code = main(["frf", str(path), "--input", "G", "--output", "a", "--nperseg", "32"])
+    code = main(["frf", str(path), "--inputs", "G", "--outputs", "a", "--nperseg", "32"])
     err = capsys.readouterr().err
     assert code == 1
     assert err.startswith(f"cappe: error: {path}: input channel(s) ['G'] not found")
     path.write_text("time,,a\n" + "".join(f"{v:.17g},{np.sin(v):.17g},{np.cos(v):.17g}\n" for v in t))
-    code = main(["frf", str(path), "--input", "F", "--output", "a"])
+    code = main(["frf", str(path), "--inputs", "F", "--outputs", "a"])
     err = capsys.readouterr().err
     assert code == 1
     assert "channel names must not be empty; channel 0 has none" in err
@@ -165,7 +166,7 @@ def test_reference_not_matching_the_model_names_the_reference(tmp_path, capsys):
     data["sensors"][0] = "n7:x"
     ref.write_text(json.dumps(data))
     capsys.readouterr()
-    code = main(["sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "4"])
+    code = main(["sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "4"])
     err = capsys.readouterr().err
     assert code == 1
     assert err.startswith(f"cappe: error: {ref}: sensor 'n7:x' does not exist in model 'two-mass-rig'")

@@ -262,7 +262,7 @@ def test_fuzzed_modal_references(modal_reference, data):
             Path(tmp),
             "ref.json",
             content,
-            lambda p: ["sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", p, "--n", "4"],
+            lambda p: ["sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", p, "--n-gsa", "4"],
         )
 
 
@@ -299,7 +299,7 @@ def test_fuzzed_time_data(content, nperseg):
             Path(tmp),
             "data.csv",
             content,
-            lambda p: ["frf", p, "--input", "F", "--output", "a", "--nperseg", nperseg],
+            lambda p: ["frf", p, "--inputs", "F", "--outputs", "a", "--nperseg", nperseg],
         )
 
 
@@ -309,7 +309,7 @@ def frf_file() -> bytes:
     with tempfile.TemporaryDirectory() as tmp:
         data, out = Path(tmp) / "data.csv", Path(tmp) / "frf.csv"
         data.write_bytes(TIME_CSV)
-        assert main(["frf", str(data), "--input", "F", "--output", "a", "--nperseg", "256", "-o", str(out)]) == 0
+        assert main(["frf", str(data), "--inputs", "F", "--outputs", "a", "--nperseg", "256", "-o", str(out)]) == 0
         return _Blob(out.read_bytes())
 
 

@@ -63,7 +63,7 @@ def test_identify_end_to_end(files, capsys):
     assert code == 0, captured.err
     text = captured.out
     # the held-out position defaults to the reference's first one
-    assert "validation position: {'z': -0.2}" in text
+    assert "validation position: z = -0.2\n" in text  # a position in words, not a Python dict (issue 22)
     assert "worst |error|" in text
     assert "runtime: gsa" in text
     assert "permuted damping (2 reassignments)" in text

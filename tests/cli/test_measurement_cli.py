@@ -46,7 +46,7 @@ def test_simulate_writes_time_data_with_units(capsys, impact_run):
 def test_impact_chain_recovers_the_rig_modes(capsys, tmp_path, impact_run, rig_modes):
     frf_file = tmp_path / "frf.uff"
     plot = tmp_path / "frf.png"
-    code, out, err = run(capsys, "frf", impact_run, "--input", "F1", "--output", "a1", "a2", "--impact",
+    code, out, err = run(capsys, "frf", impact_run, "--inputs", "F1", "--outputs", "a1,a2", "--impact",
                          "-o", frf_file, "--plot", plot, "--json")
     assert code == 0, err
     summary = json.loads(out)
@@ -81,7 +81,7 @@ def test_frf_text_output_and_random_excitation(capsys, tmp_path):
     code, _, _ = run(capsys, "simulate", "builtin:two-mass-rig", "--excite", "F1=random", "--excite", "F2=random",
                      "--fs", 1024, "--duration", 16, "--band", "0:300", "--outputs", "d1,d2", "--seed", 3, "-o", data)
     assert code == 0
-    code, out, err = run(capsys, "frf", data, "--input", "F1", "F2", "--output", "d1", "d2", "--band", "20:300",
+    code, out, err = run(capsys, "frf", data, "--inputs", "F1,F2", "--outputs", "d1,d2", "--band", "20:300",
                          "--nperseg", 4096)
     assert code == 0, err
     assert "H1 FRFs of 2 output(s) x 2 input(s)" in out
@@ -89,14 +89,14 @@ def test_frf_text_output_and_random_excitation(capsys, tmp_path):
 
 
 def test_errors_and_exit_codes(capsys, tmp_path, impact_run):
-    code, _, err = run(capsys, "frf", impact_run, "--input", "F9", "--output", "a1")
+    code, _, err = run(capsys, "frf", impact_run, "--inputs", "F9", "--outputs", "a1")
     assert code == 1
     assert "F9" in err
     assert "F1" in err  # the available channels are listed
-    code, _, err = run(capsys, "frf", impact_run, "--input", "F1", "--output", "a1", "--band", "400:100")
+    code, _, err = run(capsys, "frf", impact_run, "--inputs", "F1", "--outputs", "a1", "--band", "400:100")
     assert code == 2
     assert "--band must look like LO:HI" in err
-    code, _, err = run(capsys, "frf", impact_run, "--input", "F1", "--output", "a1", "--exp-window", "soon")
+    code, _, err = run(capsys, "frf", impact_run, "--inputs", "F1", "--outputs", "a1", "--exp-window", "soon")
     assert code == 2
     assert "--exp-window must be a time constant" in err
     code, _, err = run(capsys, "simulate", "builtin:two-mass-rig", "--excite", "F3=random")
@@ -109,7 +109,7 @@ def test_errors_and_exit_codes(capsys, tmp_path, impact_run):
     assert code == 2
     assert "unknown signal 'noise'" in err
     frf_file = tmp_path / "f.npz"
-    assert run(capsys, "frf", impact_run, "--input", "F1", "--output", "a1", "--impact", "-o", frf_file)[0] == 0
+    assert run(capsys, "frf", impact_run, "--inputs", "F1", "--outputs", "a1", "--impact", "-o", frf_file)[0] == 0
     code, _, err = run(capsys, "extract-modes", frf_file, "--band", "20:5000")
     assert code == 1
     assert "band" in err
@@ -136,7 +136,7 @@ def random_run(capsys, tmp_path):
 
 def test_fit_arx40_pruned_to_the_physical_order(capsys, tmp_path, random_run, rig_modes):
     plot = tmp_path / "pz.png"
-    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "F2", "--output", "d1", "--structure", "arx",
+    code, out, err = run(capsys, "fit", random_run, "--inputs", "F1,F2", "--output", "d1", "--structure", "arx",
                          "--order", 40, "--prune", "auto", "--plot", plot, "--json")
     assert code == 0, err
     result = json.loads(out)
@@ -162,11 +162,11 @@ def test_fit_arx40_pruned_to_the_physical_order(capsys, tmp_path, random_run, ri
 
 
 def test_fit_order_selection_and_refinement(capsys, random_run, rig_modes):
-    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "F2", "--output", "d1", "--structure", "oe",
+    code, out, err = run(capsys, "fit", random_run, "--inputs", "F1,F2", "--output", "d1", "--structure", "oe",
                          "--order", "auto", "--max-order", 5, "--criterion", "bic")
     assert code == 0, err
     assert "OE fit of d1 from F1, F2 (nb=4, nf=4, nk=1)" in out  # BIC picks the physical order 4
-    code, out, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 30, "--prune", 2,
+    code, out, err = run(capsys, "fit", random_run, "--inputs", "F1", "--output", "d1", "--order", 30, "--prune", 2,
                          "--refine", "--json")
     assert code == 0, err
     result = json.loads(out)
@@ -175,15 +175,15 @@ def test_fit_order_selection_and_refinement(capsys, random_run, rig_modes):
 
 
 def test_fit_usage_errors(capsys, random_run):
-    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", "forty")
+    code, _, err = run(capsys, "fit", random_run, "--inputs", "F1", "--output", "d1", "--order", "forty")
     assert code == 2
     assert "--order must be a positive integer or 'auto'; got 'forty'" in err
-    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 4, "--prune", "x")
+    code, _, err = run(capsys, "fit", random_run, "--inputs", "F1", "--output", "d1", "--order", 4, "--prune", "x")
     assert code == 2
     assert "--prune must be a positive number of modes or 'auto'" in err
-    code, _, err = run(capsys, "fit", random_run, "--input", "F1", "--output", "d1", "--order", 4, "--refine")
+    code, _, err = run(capsys, "fit", random_run, "--inputs", "F1", "--output", "d1", "--order", 4, "--refine")
     assert code == 2
     assert "add --prune N or --prune auto" in err
-    code, _, err = run(capsys, "fit", random_run, "--input", "F7", "--output", "d1", "--order", 4)
+    code, _, err = run(capsys, "fit", random_run, "--inputs", "F7", "--output", "d1", "--order", 4)
     assert code == 1
     assert "F7" in err

@@ -156,7 +156,7 @@ def test_frf_and_zpk_plots(capsys, tmp_path):
         "10",
         "--fmax",
         "400",
-        "--n",
+        "--lines",
         "50",
         "--plot",
         str(bode),
@@ -384,7 +384,7 @@ outputs:
   - {{name: d, quantity: displacement, body: table, direction: x}}
 """
 
-MODEL_COMMANDS = {"matrices": [], "modes": [], "tf": ["--input", "F", "--output", "d"], "frf": ["--n", "20"]}
+MODEL_COMMANDS = {"matrices": [], "modes": [], "tf": ["--input", "F", "--output", "d"], "frf": ["--lines", "20"]}
 
 
 def chain_file(tmp_path, *, m1="3.0", m2="3.0", k="2.0e6", kx="k"):
@@ -473,7 +473,7 @@ def test_extreme_masses_that_double_precision_holds_give_the_right_numbers(capsy
     np.testing.assert_allclose(freqs, want, rtol=1e-12)  # LAPACK's eigh on a 2 x 2 problem
     code, out, _ = run(capsys, "model", "modes", path, "--damping", "undamped")
     assert f"{want[0]:.4e}" in out  # not 0.000
-    code, out, _ = run(capsys, "model", "frf", path, "--json", "--n", "5")
+    code, out, _ = run(capsys, "model", "frf", path, "--json", "--lines", "5")
     assert code == 0
     data = json.loads(out)
     assert data["frequency"][0] == pytest.approx(want[0] / 10, rel=1e-9)

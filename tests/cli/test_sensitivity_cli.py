@@ -43,7 +43,7 @@ def test_sobol_with_a_reference_written_by_model_modes(capsys, tmp_path):
     assert "wrote 1 modal set(s) at 2 channels" in out
     assert json.loads(ref.read_text())["format"] == "cappe.modal/1"
     plot = tmp_path / "sobol.png"
-    code, out, _ = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "64",
+    code, out, _ = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "64",
                        "--criteria", "frequency,macxp", "--json", "--plot", str(plot))
     assert code == 0
     data = json.loads(out)
@@ -101,11 +101,11 @@ def test_reference_with_unknown_sensors_is_an_error(capsys, tmp_path):
     ref = tmp_path / "ref.json"
     ref.write_text(json.dumps({"format": "cappe.modal/1", "sensors": ["tool:x"],
                                "sets": [{"frequency": [90.0], "damping": [0.01], "shape_re": [[1.0]]}]}))
-    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "8")
+    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "8")
     assert code == 1
     assert "sensor 'tool:x' does not exist in model 'two-mass-rig'" in err
     ref.write_text(json.dumps({"format": "cappe.modal/1", "sensors": ["n1:x"],
                                "sets": [{"frequency": [90.0, 100.0], "damping": [0.01], "shape_re": [[1.0]]}]}))
-    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n", "8")
+    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "8")
     assert code == 1
     assert "sets[0].damping must list 2 number(s); got 1" in err

@@ -27,12 +27,78 @@ class UsageError(Exception):
     """A command-line argument is malformed (exit code 2)."""
 
 
-def add_output_options(parser: argparse.ArgumentParser) -> None:
+#: What ``-o`` writes, by command: the JSON result (most), or a data file chosen by its extension.
+JSON_OUT: dict[str, str] = {".json": "JSON"}
+FRF_OUT: dict[str, str] = {".uff": "UFF 58", ".unv": "UFF 58", ".csv": "CSV, re/im pairs", ".npz": "npz"}
+TIME_OUT: dict[str, str] = {".uff": "UFF 58", ".unv": "UFF 58", ".csv": "CSV", ".npz": "npz"}
+
+
+def out_file(kinds: Mapping[str, str]) -> Callable[[str], str]:
+    """An argparse ``type`` for ``-o``: the file's extension must be one of ``kinds`` (extension -> what is written).
+
+    A file that does not end in what the command writes is refused at once (exit 2), before any work: ``-o
+    frf.csv`` on a command that writes JSON would otherwise leave JSON in a file named .csv. A name without an
+    extension is taken where JSON is written.
+    """
+
+    def check(value: str) -> str:
+        suffix = Path(value).suffix.lower()
+        if suffix in kinds or (not suffix and ".json" in kinds):
+            return value
+        shown = ", ".join(f"{ext} ({what})" for ext, what in kinds.items())
+        msg = f"{value!r}: this command writes {shown}; give FILE one of these extensions"
+        raise argparse.ArgumentTypeError(msg)
+
+    check.__name__ = "FILE"
+    return check
+
+
+def add_output_options(parser: argparse.ArgumentParser, kinds: Mapping[str, str] = JSON_OUT) -> None:
     parser.add_argument("--json", action="store_true", help="print machine-readable JSON")
-    parser.add_argument("-o", "--out", metavar="FILE", help="write the result to FILE (JSON)")
+    what = " or ".join(dict.fromkeys(kinds.values()))
+    ext = ", ".join(kinds)
+    parser.add_argument("-o", "--out", metavar="FILE", type=out_file(kinds),
+                        help=f"write the result to FILE ({what}, by the extension: {ext})" if len(kinds) > 1
+                        else f"write the result to FILE ({what})")
 
 
-def add_model_options(parser: argparse.ArgumentParser) -> None:
+class _Deprecated(argparse.Action):
+    """An old spelling of an option: stores into the new option's ``dest`` and says which spelling to use."""
+
+    def __init__(self, option_strings: list[str], dest: str, *, instead: str, join: bool = False,
+                 **kwargs: Any) -> None:
+        self.instead, self.join = instead, join
+        super().__init__(option_strings, dest, **kwargs)
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace, values: Any,
+                 option_string: str | None = None) -> None:
+        if self.join and isinstance(values, list):
+            values = ",".join(values)
+        print(f"cappe: warning: {option_string} is deprecated; use {self.instead}", file=sys.stderr)
+        setattr(namespace, self.dest, values)
+
+
+def add_deprecated(parser: argparse.ArgumentParser | Any, option: str, *, dest: str, instead: str,
+                   join: bool = False, **kwargs: Any) -> None:
+    """Accept ``option``, an old spelling, as ``instead`` (which stores into ``dest``), with a deprecation message.
+
+    ``join``: the old spelling took space-separated values (``--input A B``); they are stored as the comma list
+    the new spelling takes.
+    """
+    parser.add_argument(option, dest=dest, action=_Deprecated, instead=instead, join=join,
+                        help=f"deprecated: use {instead}", **kwargs)
+
+
+def channels(value: str | None, option: str) -> list[str]:
+    """A required comma-separated channel list (``--inputs A,B``), or a usage error naming ``option``."""
+    listed = names(value)
+    if not listed:
+        msg = f"{option} is required (a comma-separated list of channels, e.g. {option} F1,F2)"
+        raise UsageError(msg)
+    return listed
+
+
+def add_model_options(parser: argparse.ArgumentParser, out: Mapping[str, str] = JSON_OUT) -> None:
     parser.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
     parser.add_argument("--params", metavar="FILE.json", help="parameter values {name: value} (SI)")
     parser.add_argument(
@@ -46,7 +112,7 @@ def add_model_options(parser: argparse.ArgumentParser) -> None:
     parser.add_argument(
         "--position", metavar="AXIS=VALUE", action="append", default=[], help="axis position, e.g. z=0.135 (repeatable)"
     )
-    add_output_options(parser)
+    add_output_options(parser, out)
 
 
 def text_pairs(

@@ -8,11 +8,12 @@ measurements; ``status``, ``history`` and ``alarms`` read the store; ``serve`` s
 from __future__ import annotations
 
 import argparse
+import json
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from cappe.cli._common import ModelContext, UsageError, emit, names, number_pairs, text_pairs
+from cappe.cli._common import ModelContext, UsageError, add_output_options, emit, names, number_pairs, text_pairs
 from cappe.cli._common import band as parse_band
 from cappe.exceptions import DataError, ModelError
 
@@ -24,7 +25,7 @@ def _store_options(p: argparse.ArgumentParser, *, machine: bool = True) -> None:
                                                    "(postgresql+psycopg://user@host/db)")
     if machine:
         p.add_argument("--machine", help="machine id (default: the store's only machine)")
-    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    add_output_options(p)
 
 
 def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -83,7 +84,8 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL")
     p.add_argument("files", metavar="FILE", nargs="*", help="measurement files")
     p.add_argument("--machine", help="machine id (default: the store's only machine)")
-    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
+    add_output_options(p)
+    p.add_argument("--progress", action="store_true", help="a progress bar even when stderr is not a terminal")
     p.add_argument("--manifest", help="scenario.json from `cappe monitor simulate` (files, times, conditions)")
     p.add_argument("--time", help="ISO time of a single FILE (default: the file's modification time)")
     p.add_argument("--condition", metavar="NAME=VALUE", action="append", default=[],
@@ -255,8 +257,10 @@ def ingest(args: argparse.Namespace) -> int:
     with _open(args.store) as store:
         machine = _machine(args, store)
         monitor = Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
-        # a progress bar on a terminal only: never in a log, a pipe or next to an error message
-        progress = tqdm(jobs, desc="ingest", unit="meas", disable=(len(jobs) < 3 or args.json) or None, leave=False)
+        # a progress bar on a terminal only (None: tqdm's test) unless asked: never in a log or a pipe by default
+        quiet = len(jobs) < 3 or args.json
+        progress = tqdm(jobs, desc="ingest", unit="meas", disable=False if args.progress else (quiet or None),
+                        leave=False)
         for index, (path, when, conds) in enumerate(progress):
             before: set[int] | None = None
             try:
@@ -399,9 +403,14 @@ def history(args: argparse.Namespace) -> int:
 
         write_text(args.csv, wide.to_csv())
     text = wide.to_string(float_format=lambda v: f"{v:.4f}")
-    rows = [{"measurement_id": int(i), "timestamp": str(t), **row.to_dict()} for (i, t), row in wide.iterrows()]
+    rows = [{"measurement_id": int(i), "timestamp": _iso(t), **row.to_dict()} for (i, t), row in wide.iterrows()]
     emit(args, {"machine": machine, "path": args.path, "rows": rows}, text)
     return 0
+
+
+def _iso(when: Any) -> str:
+    """A stored time as ISO 8601 with the 'T' separator (the form --since, --until and --start take)."""
+    return str(when.isoformat()) if hasattr(when, "isoformat") else str(when)
 
 
 def alarms(args: argparse.Namespace) -> int:
@@ -424,8 +433,16 @@ def serve(args: argparse.Namespace) -> int:
 
     with _open(args.store) as store:
         server = make_server(store, host=args.host, port=args.port, allowed_hosts=args.allowed_host)
-        print(f"cappe dashboard of {args.store} at {server.url} (Ctrl-C stops it); answers to host names "
-              + ", ".join(f"[{n}]" if ":" in n else n for n in server.allowed_hosts), flush=True)
+        started = {"store": args.store, "url": server.url, "allowed_hosts": list(server.allowed_hosts)}
+        if args.out:
+            from cappe.io import write_json
+
+            write_json(args.out, started)
+        if args.json:  # one line: a script that asked for a free port (--port 0) reads the address from it
+            print(json.dumps(started), flush=True)
+        else:
+            print(f"cappe dashboard of {args.store} at {server.url} (Ctrl-C stops it); answers to host names "
+                  + ", ".join(f"[{n}]" if ":" in n else n for n in server.allowed_hosts), flush=True)
         try:
             server.serve_forever()
         except KeyboardInterrupt:

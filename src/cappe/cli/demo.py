@@ -95,8 +95,7 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
     t0 = time.perf_counter()
     machine = NumericModel(load_model("builtin:uniaxial-machine-tool"))
     space = ParameterSpace.from_model(machine)
-    rng = np.random.default_rng(args.seed)
-    truth = space.mapping(space.lower * (space.upper / space.lower) ** rng.uniform(size=space.n))
+    truth = space.mapping(space.sample(args.seed))
     reference = reference_modes(machine, params=machine.structure.resolve_parameters(truth), positions="all",
                                 n_modes=20)
     estimator = AutomatedIdentification(machine, n_gsa=args.n_gsa, n_opt=args.n_opt, validation={"z": -0.294},

@@ -7,7 +7,7 @@ import sys
 import warnings
 from typing import Any
 
-from cappe.cli._common import UsageError, add_output_options, emit, naming_file
+from cappe.cli._common import UsageError, add_deprecated, add_output_options, channels, emit, naming_file
 
 #: cappe.identify.BLACK_BOX_STRUCTURES, spelled out so that building the parser imports no numerical library
 STRUCTURES = ("arx", "armax", "oe", "bj")
@@ -19,7 +19,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         help="black-box model (ARX, ARMAX, OE, BJ) from time data: continuous TF, poles, modes; pruning",
     )
     p.add_argument("data", metavar="DATA", help="time data file (UFF 58, CSV with a time column, or .npz)")
-    p.add_argument("--input", nargs="+", required=True, metavar="CH", help="input channel(s)")
+    p.add_argument("--inputs", metavar="LIST", help="input channels, comma-separated (required)")
+    add_deprecated(p, "--input", dest="inputs", instead="--inputs A,B", join=True, nargs="+", metavar="CH")
     p.add_argument("--output", required=True, metavar="CH", help="output channel")
     p.add_argument("--structure", choices=STRUCTURES, default="arx", help="model structure (default arx)")
     p.add_argument("--order", default="auto",
@@ -58,6 +59,7 @@ def run(args: argparse.Namespace) -> int:
     from cappe.identify import fit_black_box
     from cappe.io import read_time_data
 
+    inputs = channels(args.inputs, "--inputs")
     n = _count_or_auto(args.order, "--order", "a positive integer")
     prune_to = _count_or_auto(args.prune, "--prune", "a positive number of modes")
     if (args.refine or args.plot or args.cutoff is not None) and args.prune is None:
@@ -67,7 +69,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         fit = fit_black_box(
-            data, inputs=args.input, output=args.output, structure=args.structure,
+            data, inputs=inputs, output=args.output, structure=args.structure,
             order="auto" if n is None else n, criterion=args.criterion, max_order=args.max_order, nk=args.nk,
             prune=None if args.prune is None else ("auto" if prune_to is None else prune_to),
             cutoff=args.cutoff, max_damping=args.max_damping, refine=args.refine,
@@ -78,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
             orders = ", ".join(f"{k}={v}" for k, v in fit.orders.items())
             pruned = fit.pruned[0]
-            pruning_plot(pruned, args.plot, f"{args.output}/{args.input[0]}: {args.structure.upper()} "
+            pruning_plot(pruned, args.plot, f"{args.output}/{inputs[0]}: {args.structure.upper()} "
                          f"({orders}) pruned to {pruned.modes.n_modes} mode(s)")
             items = list(result.items())  # "plot" right after "pruning", as ever
             items.insert(list(result).index("pruning") + 1, ("plot", args.plot))
@@ -87,17 +89,17 @@ def run(args: argparse.Namespace) -> int:
     for message in warned:
         print(f"cappe: warning: {message}", file=sys.stderr)
     result["warnings"] = warned
-    emit(args, result, _text(args, result, fit.modes))
+    emit(args, result, _text(args, inputs, result, fit.modes))
     return 0
 
 
-def _text(args: argparse.Namespace, result: dict[str, Any], modes: Any) -> str:
+def _text(args: argparse.Namespace, inputs: list[str], result: dict[str, Any], modes: Any) -> str:
     orders = ", ".join(f"{k}={v}" for k, v in result["orders"].items())
-    lines = [f"{args.structure.upper()} fit of {args.output} from {', '.join(args.input)} ({orders}): "
+    lines = [f"{args.structure.upper()} fit of {args.output} from {', '.join(inputs)} ({orders}): "
              f"{result['fit_percent']:.2f} % fit ({result['fit_horizon']}"
              f"{'' if result['stable'] else ', the model is unstable'})"]
     if "pruning" in result:
-        first = result["pruning"][args.input[0]]
+        first = result["pruning"][inputs[0]]
         removed = ", ".join(f"{rule} {count}" for rule, count in first["removed_counts"].items()) or "none"
         lines.append(f"pruned to {modes.n_modes} mode(s); removed poles and zeros by rule: {removed}")
     if "refined" in result:

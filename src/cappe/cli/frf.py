@@ -9,14 +9,16 @@ from typing import Literal
 
 import numpy as np
 
-from cappe.cli._common import UsageError, add_output_options, band, emit, naming_file
+from cappe.cli._common import FRF_OUT, UsageError, add_deprecated, add_output_options, band, channels, emit, naming_file
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p = sub.add_parser("frf", help="estimate FRFs with coherence from measured time data (UFF 58, CSV, npz)")
     p.add_argument("data", metavar="DATA", help="time data file (UFF 58, CSV with a time column, or .npz)")
-    p.add_argument("--input", nargs="+", required=True, metavar="CH", help="input (force) channel(s)")
-    p.add_argument("--output", nargs="+", required=True, metavar="CH", help="output (response) channel(s)")
+    p.add_argument("--inputs", metavar="LIST", help="input (force) channels, comma-separated (required)")
+    p.add_argument("--outputs", metavar="LIST", help="output (response) channels, comma-separated (required)")
+    add_deprecated(p, "--input", dest="inputs", instead="--inputs A,B", join=True, nargs="+", metavar="CH")
+    add_deprecated(p, "--output", dest="outputs", instead="--outputs A,B", join=True, nargs="+", metavar="CH")
     p.add_argument("--estimator", choices=["H1", "H2", "Hv"], default="H1", help="FRF estimator (default H1)")
     p.add_argument("--nperseg", type=int, help="samples per segment (line spacing fs/nperseg); default 8 averages")
     p.add_argument("--overlap", type=float, default=0.5, help="segment overlap fraction (default 0.5)")
@@ -26,7 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--band", metavar="LO:HI", help="keep and check only this band in Hz")
     p.add_argument("--coherence-threshold", type=float, default=0.8, help="coherence warning level (default 0.8)")
     p.add_argument("--plot", metavar="FILE.png", help="plot magnitude, phase and coherence")
-    add_output_options(p)
+    add_output_options(p, FRF_OUT)
     p.set_defaults(func=run)
     p.epilog = "-o writes the FRFs: .uff/.unv (UFF 58), .csv (re/im pairs) or .npz, by extension."
 
@@ -36,6 +38,7 @@ def run(args: argparse.Namespace) -> int:
     from cappe.identify import coherence_summary, estimate_frf
     from cappe.io import read_time_data, write_frf
 
+    inputs, outputs = channels(args.inputs, "--inputs"), channels(args.outputs, "--outputs")
     data = read_time_data(args.data)
     exp_window: float | Literal["auto"] | None = "auto"
     if args.exp_window is not None:
@@ -52,7 +55,7 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         frf = estimate_frf(
-            data, inputs=args.input, outputs=args.output, estimator=args.estimator, nperseg=args.nperseg,
+            data, inputs=inputs, outputs=outputs, estimator=args.estimator, nperseg=args.nperseg,
             noverlap=noverlap, window=args.window, impact=args.impact, exponential_window=exp_window,
             band=lo_hi, coherence_threshold=args.coherence_threshold,
         )

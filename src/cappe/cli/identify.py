@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from cappe.cli._common import UsageError, emit, names, number_pairs
+from cappe.cli._common import UsageError, add_deprecated, add_output_options, emit, names, number_pairs
 
 if TYPE_CHECKING:
     from cappe.estimate import AutomatedResult, ParameterEstimate
@@ -45,9 +45,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--n-gsa", type=int, default=1024, help="Sobol base sample size, a power of two (default 1024)")
     p.add_argument("--n-opt", type=int, default=100, help="local searches per subproblem (default 100)")
     p.add_argument("--threshold", type=float, default=0.01, help="significance threshold on ST (default 0.01)")
-    p.add_argument("--noise", metavar="F,Z,S",
-                   help="relative noise of the reference's frequencies, damping ratios and shapes (e.g. "
-                        "0.005,0.05,0.02): weights the final refinement by it")
+    for quantity, example in (("frequency", 0.005), ("damping", 0.05), ("shape", 0.02)):
+        p.add_argument(f"--noise-{quantity}", type=float, metavar="REL",
+                       help=f"relative noise of the reference's {quantity} values (e.g. {example}; as in cappe "
+                            "simulate): with all three, the final refinement is weighted by them")
+    add_deprecated(p, "--noise", dest="noise", instead="--noise-frequency F --noise-damping Z --noise-shape S",
+                   metavar="F,Z,S")
     p.add_argument("--first-order", action="store_true",
                    help="final refinement on first-order modes (for first-order references) instead of exact ones")
     p.add_argument("--permutations", type=int, default=10,
@@ -63,8 +66,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="run the GSA and the subproblems on an existing Dask cluster (overrides --executor)")
     p.add_argument("--progress", action="store_true", help="progress bars even when stderr is not a terminal")
     p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report")
-    p.add_argument("--json", action="store_true", help="print machine-readable JSON")
-    p.add_argument("-o", "--out", metavar="FILE", help="write the result (cappe.estimate/1 JSON)")
+    add_output_options(p)
     p.set_defaults(func=run)
 
 
@@ -76,17 +78,32 @@ def _position(value: str | None, reference: Any) -> dict[str, float] | None:
     return number_pairs([v for v in value.split(",") if v.strip()], "--validation")
 
 
-def _noise(value: str | None) -> tuple[float, float, float] | None:
-    if value is None:
+def _noise(args: argparse.Namespace) -> tuple[float, float, float] | None:
+    """The reference's relative noise (frequency, damping, shape): the three options, or the deprecated --noise."""
+    given = {q: getattr(args, f"noise_{q}") for q in ("frequency", "damping", "shape")}
+    if args.noise is not None:
+        if any(v is not None for v in given.values()):
+            msg = "give either --noise-frequency/--noise-damping/--noise-shape or the deprecated --noise F,Z,S"
+            raise UsageError(msg)
+        try:
+            levels = tuple(float(v) for v in args.noise.split(","))
+        except ValueError:
+            levels = ()
+        if len(levels) != 3 or not all(math.isfinite(v) and v > 0 for v in levels):
+            msg = f"--noise must be three numbers > 0 like 0.005,0.05,0.02; got {args.noise!r}"
+            raise UsageError(msg)
+        return (levels[0], levels[1], levels[2])
+    if all(v is None for v in given.values()):
         return None
-    try:
-        levels = tuple(float(v) for v in value.split(","))
-    except ValueError:
-        levels = ()
-    if len(levels) != 3 or not all(math.isfinite(v) and v > 0 for v in levels):
-        msg = f"--noise must be three numbers > 0 like 0.005,0.05,0.02; got {value!r}"
+    missing = [f"--noise-{q}" for q, v in given.items() if v is None]
+    if missing:
+        msg = f"the refinement is weighted by all three noise levels; {', '.join(missing)} missing"
         raise UsageError(msg)
-    return (levels[0], levels[1], levels[2])
+    bad = {f"--noise-{q}": v for q, v in given.items() if not (math.isfinite(v) and v > 0)}
+    if bad:
+        msg = f"noise levels must be > 0; got {bad}"
+        raise UsageError(msg)
+    return (given["frequency"], given["damping"], given["shape"])
 
 
 def run(args: argparse.Namespace) -> int:
@@ -127,7 +144,7 @@ def run(args: argparse.Namespace) -> int:
     estimator = AutomatedIdentification(
         NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
         n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
-        n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args.noise),
+        n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args),
         overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, progress=progress,
     )
     with warnings.catch_warnings(record=True) as caught:
@@ -165,13 +182,13 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     estimate, settings = result.estimate, result.settings
     lines = [f"{model_name}: automated identification of {len(estimate.names)} unknowns "
              f"(n_gsa {settings.n_gsa}, n_opt {settings.n_opt}, threshold {settings.threshold})",
-             f"identification positions: {list(result.identification_positions)}; "
-             f"validation position: {result.validation_position}"]
+             f"identification positions: {_where_all(result.identification_positions)}; "
+             f"validation position: {_where(result.validation_position, 'none held out')}"]
     lines += _parameter_rows(estimate, truth)
     lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
     val = result.validation
     if val.held is not None:
-        lines += _row_stats(f"validation at {val.held.position}", val.held.statistics())
+        lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())
     pooled = val.identification_statistics()
     if pooled:
         lines += _row_stats("identification positions", pooled)
@@ -184,6 +201,20 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     if not estimate.success:
         lines.append(f"not converged: {estimate.message}")
     return "\n".join(lines)
+
+
+def _where(position: Any, missing: str = "-") -> str:
+    """An axis position as ``z = -0.294`` (``missing`` for None, 'the one configuration' for a model without axes)."""
+    if position is None:
+        return missing
+    if not position:
+        return "the one configuration (no axes)"
+    return ", ".join(f"{axis} = {float(value):g}" for axis, value in dict(position).items())
+
+
+def _where_all(positions: Any) -> str:
+    listed = [_where(p) for p in positions]
+    return "; ".join(listed) if listed else "none"
 
 
 def _parameter_rows(estimate: ParameterEstimate, truth: dict[str, float] | None) -> list[str]:

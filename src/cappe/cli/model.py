@@ -7,11 +7,22 @@ import functools
 import sys
 import warnings
 from collections.abc import Callable
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names
+from cappe.cli._common import (
+    FRF_OUT,
+    JSON_OUT,
+    ModelContext,
+    UsageError,
+    add_deprecated,
+    add_model_options,
+    add_output_options,
+    emit,
+    names,
+)
 from cappe.exceptions import ModelError
 
 
@@ -43,7 +54,8 @@ def _with_model(func: Callable[[argparse.Namespace, ModelContext], int]) -> Call
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
-    parser = sub.add_parser("model", help="model representations: show, matrices, modes, tf, zpk, ss, frf, check")
+    parser = sub.add_parser("model", help="model representations: show, matrices, modes, tf, zpk, ss, frf, check; "
+                                          "random-truth")
     cmds = parser.add_subparsers(dest="model_command", metavar="COMMAND", required=True)
 
     p = cmds.add_parser("show", help="parameters, bodies, elements, inputs, outputs, sensors")
@@ -87,15 +99,31 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--method", choices=["zoh", "tustin"], default="zoh")
     p.set_defaults(func=ss)
 
-    p = cmds.add_parser("frf", help="frequency response functions")
-    add_model_options(p)
+    p = cmds.add_parser("frf", help="frequency response functions",
+                        epilog="-o writes the FRFs as UFF 58 (.uff/.unv), CSV (.csv) or npz (.npz) by the extension, "
+                               "or this command's JSON (.json).")
+    add_model_options(p, {**JSON_OUT, **FRF_OUT})
     p.add_argument("--inputs", help="comma-separated inputs (default all)")
     p.add_argument("--outputs", help="comma-separated outputs (default all)")
     p.add_argument("--fmin", type=float, default=None, help="lowest frequency (Hz)")
     p.add_argument("--fmax", type=float, default=None, help="highest frequency (Hz)")
-    p.add_argument("--n", type=int, default=400, help="number of frequencies (log spaced)")
+    p.add_argument("--lines", type=int, default=400, metavar="N",
+                   help="number of frequencies, log spaced (default 400)")
+    add_deprecated(p, "--n", dest="lines", instead="--lines", type=int, metavar="N")
     p.add_argument("--plot", metavar="FILE.png", help="write a Bode plot")
     p.set_defaults(func=frf)
+
+    p = cmds.add_parser(
+        "random-truth", help="a random parameter file within the unknowns' bounds (log-uniform where positive)",
+        description="Draws each unknown parameter within its bounds, log-uniformly where both bounds are positive "
+                    "(as the paper's random truths), uniformly otherwise, and writes {name: value} with -o: the "
+                    "parameter file that `cappe simulate --params` and `cappe identify --truth` read.")
+    p.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
+    p.add_argument("--unknowns", metavar="LIST", help="comma-separated parameters to draw (default: those marked "
+                                                      "unknown)")
+    p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
+    add_output_options(p)
+    p.set_defaults(func=random_truth)
 
     p = cmds.add_parser("check", help="validation, conditioning, rigid-body modes, exact invertibility")
     add_model_options(p)
@@ -270,7 +298,13 @@ def _write_modal(ctx: ModelContext, args: argparse.Namespace) -> str:
     engine = ModalEngine(ctx.numeric, sensors=names(args.sensors))
     data = engine.modal_data(positions, ctx.values, exact=args.damping == "exact")
     write_modal_data(args.modal_out, data)
-    return f"wrote {len(data.sets)} modal set(s) at {len(data.sensors)} channels to {args.modal_out}"
+    text = f"wrote {len(data.sets)} modal set(s) at {len(data.sensors)} channels to {args.modal_out}"
+    if not ctx.structure.sensors and not args.sensors:
+        from cappe.modal._reference import no_sensors_message
+
+        text += (f"\nnote: the channels are the model's DOFs ({', '.join(data.sensors[:3])} ...); cappe simulate, "
+                 f"identify and estimate compare modes at sensor nodes: {no_sensors_message(ctx.structure)}")
+    return text
 
 
 # -- tf / zpk ---------------------------------------------------------------------------------------
@@ -380,10 +414,10 @@ def frf(args: argparse.Namespace, ctx: ModelContext) -> int:
     if not 0 < fmin < fmax:
         msg = f"need 0 < --fmin < --fmax; got {fmin:g} and {fmax:g}"
         raise UsageError(msg)
-    if args.n < 2:
-        msg = f"--n must be at least 2; got {args.n}"
+    if args.lines < 2:
+        msg = f"--lines must be at least 2; got {args.lines}"
         raise UsageError(msg)
-    freq = np.geomspace(fmin, fmax, args.n)
+    freq = np.geomspace(fmin, fmax, args.lines)
     result = system.frf(freq, names(args.inputs), names(args.outputs))
     data = result.to_dict()
     if args.plot:
@@ -397,8 +431,35 @@ def frf(args: argparse.Namespace, ctx: ModelContext) -> int:
             mag = np.abs(result.H[o, i])
             k = int(np.argmax(mag))
             peaks.append(f"{out}/{inp}: max |H| = {mag[k]:.4g} at {freq[k]:.2f} Hz")
-    text = f"FRF on {args.n} frequencies from {fmin:g} to {fmax:g} Hz\n" + "\n".join(peaks)
+    text = f"FRF on {args.lines} frequencies from {fmin:g} to {fmax:g} Hz\n" + "\n".join(peaks)
+    if args.out and Path(args.out).suffix.lower() in FRF_OUT:
+        from cappe.io import write_frf
+
+        write_frf(args.out, result)
+        text += f"\nwrote {args.out}"
+        args = argparse.Namespace(**{**vars(args), "out": None})  # -o got the FRFs, not this summary
     emit(args, data, text)
+    return 0
+
+
+# -- random-truth -----------------------------------------------------------------------------------
+def random_truth(args: argparse.Namespace) -> int:
+    from cappe.estimate import ParameterSpace
+    from cappe.model import load_model
+
+    structure = load_model(args.model)
+    space = ParameterSpace.from_model(structure, names(args.unknowns))
+    truth = space.mapping(space.sample(args.seed))
+    lines = [f"{structure.name}: random truth of {space.n} unknowns within their bounds (seed {args.seed})",
+             f"  {'parameter':<12}{'value':>13}  {'bounds':<25} draw"]
+    for k, (name, value) in enumerate(truth.items()):
+        bounds = f"[{space.lower[k]:.4g}, {space.upper[k]:.4g}]"
+        unit = structure.parameter(name).unit
+        lines.append(f"  {name:<12}{value:>13.5g}  {bounds:<25} {'log-uniform' if space.log[k] else 'uniform'}"
+                     f"{'  ' + unit if unit else ''}")
+    if args.out:
+        lines.append(f"wrote {args.out} (parameter file: --params / --truth)")
+    emit(args, truth, "\n".join(lines))
     return 0
 
 
@@ -438,16 +499,24 @@ def check(args: argparse.Namespace, ctx: ModelContext) -> int:
             f"{inv.exact_ranks[1]} / {inv.exact_ranks[0]} -> "
             f"{'invertible' if inv.invertible_exact else 'NOT invertible'}"
         )
-        lines.append(
-            f"  (double precision ranks {inv.float_ranks[1]} / {inv.float_ranks[0]} -> "
-            f"{'invertible' if inv.invertible_float else 'not invertible'}"
-            f"{'; float rank is wrong here' if inv.invertible_float != inv.invertible_exact else ''})"
-        )
+        lines.append(_float_sain_massey(inv))
     else:
         lines.append(f"  exact rank tests skipped: {result.n_states} states > {EXACT_STATE_LIMIT} (rational Krylov "
                      "and Sain-Massey matrices of this size take minutes to hours); --exact always forces them")
     emit(args, result.to_dict(), "\n".join(lines))
     return 0
+
+
+def _float_sain_massey(inv: Any) -> str:
+    """The double-precision Sain-Massey ranks beside the exact ones, saying whether they agree and which to trust."""
+    ranks = f"double precision ranks {inv.float_ranks[1]} / {inv.float_ranks[0]}"
+    if tuple(inv.float_ranks) == tuple(inv.exact_ranks):
+        return f"  ({ranks}: the same as the exact ranks)"
+    if inv.invertible_float != inv.invertible_exact:
+        verdict = "invertible" if inv.invertible_float else "not invertible"
+        return (f"  ({ranks} -> {verdict}: the SVD ranks of M_n differ from the exact ones and give the wrong "
+                "verdict here; the exact test above holds)")
+    return f"  ({ranks}: they differ from the exact ranks, but give the same verdict)"
 
 
 __all__ = ["register"]

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, band, emit, names
+from cappe.cli._common import ModelContext, UsageError, add_model_options, add_output_options, band, emit, names
 from cappe.cli._monitor_chain import register as _register_chain
 
 
@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         description=(
             "Thesis 5.4.4 / App. C4: a slow force on the shaft and two displacement probes (shaft relative to "
             "housing) away from the bearings; rigid-shaft kinematics and the lever rule give each bearing's "
-            "stiffness sample by sample (coefficients from the geometry), with mean, std and 95 %% interval."
+            "stiffness sample by sample (coefficients from the geometry), with mean, std and 95 % interval."
         ),
     )
     q.add_argument("data", metavar="DATA", help="time data (UFF 58, CSV or npz)")
@@ -57,8 +57,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     q.add_argument("--z-sensors", required=True, metavar="Z1,Z2", help="axial positions of the probes (m)")
     q.add_argument("--min-force", type=float, default=0.3,
                    help="leave out samples below this fraction of the largest force (default 0.3)")
-    q.add_argument("--json", action="store_true", help="print machine-readable JSON")
-    q.add_argument("-o", "--out", metavar="FILE", help="write the result to FILE (JSON)")
+    add_output_options(q)
     q.set_defaults(func=bearing_test)
 
 

@@ -7,7 +7,7 @@ import sys
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, naming_file
+from cappe.cli._common import ModelContext, UsageError, add_deprecated, add_model_options, emit, names, naming_file
 from cappe.exceptions import DataError, ModelError
 
 
@@ -22,7 +22,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     mode.add_argument("--sobol", action="store_true", help="Sobol indices per reference mode, position, criterion")
     p.add_argument("--percent", type=float, default=10.0, help="--local: size of the parameter changes (default 10)")
     p.add_argument("--reference", metavar="FILE.json", help="--sobol: reference modes (cappe.modal/1)")
-    p.add_argument("--n", type=int, default=1024, help="--sobol: base sample size, a power of two (default 1024)")
+    p.add_argument("--n-gsa", type=int, default=1024, metavar="N",
+                   help="--sobol: Sobol base sample size, a power of two (default 1024; as in cappe identify)")
+    add_deprecated(p, "--n", dest="n_gsa", instead="--n-gsa", type=int, metavar="N")
+    p.add_argument("--progress", action="store_true", help="--sobol: progress bar even when stderr is not a terminal")
     p.add_argument("--seed", type=int, default=0, help="--sobol: random seed (default 0)")
     p.add_argument("--parameters", metavar="LIST",
                    help="comma-separated parameters (default: all for --local, the unknown ones for --sobol)")
@@ -69,15 +72,16 @@ def _sobol(ctx: ModelContext, args: argparse.Namespace) -> int:
         msg = "--sobol needs --reference FILE.json (modal data, format cappe.modal/1)"
         raise UsageError(msg)
     reference = read_modal_data(args.reference)
-    result = model_sobol(ctx.numeric, reference, parameters=names(args.parameters), n=args.n, rng=args.seed,
-                         criteria=names(args.criteria) or [], progress=not args.json and sys.stderr.isatty())
+    progress = args.progress or (not args.json and sys.stderr.isatty())
+    result = model_sobol(ctx.numeric, reference, parameters=names(args.parameters), n=args.n_gsa, rng=args.seed,
+                         criteria=names(args.criteria) or [], progress=progress)
     if args.plot:
         result.plot(args.plot)
     data = result.to_dict()
     significant = result.significant(args.threshold)
     data["significant"] = {k: list(v) for k, v in significant.items()}
     lines = [f"{ctx.structure.name}: Sobol indices of {len(result.sobol.output_names)} outputs, "
-             f"{len(result.names)} parameters, N = {args.n} ({args.n * (len(result.names) + 2)} model runs "
+             f"{len(result.names)} parameters, N = {args.n_gsa} ({args.n_gsa * (len(result.names) + 2)} model runs "
              f"per position); parameters with ST > {args.threshold:g}:"]
     for output, params in significant.items():
         lines.append(f"  {output:<28} {', '.join(params) if params else '-'}")

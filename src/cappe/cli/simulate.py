@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from cappe.cli._common import ModelContext, UsageError, add_model_options, band, emit, names
+from cappe.cli._common import JSON_OUT, TIME_OUT, ModelContext, UsageError, add_model_options, band, emit, names
 
 SIGNALS = ("random", "periodic-random", "chirp", "prbs", "impact", "sine:FREQ", "square:FREQ")
 #: Time-simulation options and their defaults (None on the command line means "not given").
@@ -49,7 +49,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
             "exact FRFs as UFF 58 (--frf)."
         ),
     )
-    add_model_options(p)
+    add_model_options(p, {**JSON_OUT, **TIME_OUT})
     time = p.add_argument_group("time data (with --excite)")
     time.add_argument("--excite", metavar="INPUT=SIGNAL", action="append", default=[],
                       help=f"excite a model input; SIGNAL is one of {', '.join(SIGNALS)} (repeatable)")
@@ -133,6 +133,11 @@ def _signal(
 
 
 def run(args: argparse.Namespace) -> int:
+    suffix = Path(args.out).suffix.lower() if args.out else None
+    if suffix is not None and bool(args.excite) != (suffix in TIME_OUT):
+        msg = (f"-o {args.out}: with --excite, -o writes time data (.uff/.unv, .csv or .npz)" if args.excite else
+               f"-o {args.out}: without --excite, -o writes reference modal data (cappe.modal/1 JSON, .json)")
+        raise UsageError(msg)
     if args.excite:
         given = [flag for dest, flag in MODAL_OPTIONS.items() if getattr(args, dest) not in (None, [])]
         if given:

@@ -268,6 +268,12 @@ class AutomatedIdentification(Estimator):
             raise ModelError(msg)
         labels, _ = model.sensor_matrix()
         missing = [s for s in data.sensors if s not in labels]
+        if missing and not labels:
+            from cappe.modal._reference import no_sensors_message
+
+            shown = f"{missing[:6]}{' ...' if len(missing) > 6 else ''}"
+            msg = f"reference sensors {shown}: {no_sensors_message(model.structure)}"
+            raise DataError(msg)
         if missing:
             msg = f"reference sensors {missing} are not sensor channels of model '{name}'; its channels: {labels}"
             raise DataError(msg)

@@ -16,6 +16,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
+from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import ModelError
 from cappe.model import NumericModel, Structure
 
@@ -222,6 +223,45 @@ class ParameterSpace:
         out = np.broadcast_to(self.base, (*p.shape[:-1], self.base.size)).copy()
         out[..., self.columns] = p
         return out
+
+    def sample(self, rng: RandomLike = None) -> Array:
+        """A random point within the bounds: log-uniform for log-searched unknowns, uniform for the others.
+
+        The way the paper draws its random truths (Ellinger & Zaeh 2022, eq. 14 bounds); ``cappe model
+        random-truth`` writes one as a parameter file.
+
+        Parameters
+        ----------
+        rng : int, numpy.random.Generator or None
+            Seed or generator (one ``uniform(size=n)`` draw is taken from it).
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            Values of the unknowns (SI) in the order of ``names``.
+
+        Raises
+        ------
+        ModelError
+            An unknown without finite bounds (there is no uniform distribution to draw from).
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> space = ParameterSpace.from_model(load_model("builtin:two-mass-rig"), ["k11"], bounds={"k11": (1e5, 1e6)})
+        >>> bool(1e5 <= space.sample(0)[0] <= 1e6)
+        True
+        """
+        open_ = [n for n, lo, hi in zip(self.names, self.lower, self.upper, strict=True)
+                 if not (np.isfinite(lo) and np.isfinite(hi))]
+        if open_:
+            msg = f"unknowns {open_} have no finite bounds to draw a random value within; give them bounds"
+            raise ModelError(msg)
+        u = as_generator(rng).uniform(size=self.n)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            drawn = np.where(self.log, self.lower * (self.upper / self.lower) ** u,
+                             self.lower + (self.upper - self.lower) * u)
+        return np.asarray(drawn, dtype=float)
 
     def mapping(self, values: ArrayLike) -> dict[str, float]:
         """``{name: value}`` of one vector.

@@ -16,6 +16,22 @@ __all__ = ["ModalBatch"]
 Array = NDArray[np.float64]
 
 
+#: Relative size of the real part that rounding leaves on the exact pole of an undamped mode (|Re| / |lambda|
+#: ~ 1e-16 from the eigen solve; 1e-10 leaves room for ill-conditioned models and stays far from any real damping).
+ROUNDING_DAMPING = 1e-10
+
+
+def pole_damping(poles: NDArray[np.complex128]) -> Array:
+    """Damping ratios ``-Re(lambda) / |lambda|`` of nonzero poles, with an undamped mode's rounding residue set to 0.
+
+    An undamped mode's exact pole comes out with a real part of either sign at rounding level (-2.6e-17 on a model
+    without damping in that direction); a modal data file must hold ratios in [0, 1), so that residue is 0, while a
+    really negative ratio (an unstable mode, below -1e-10) is kept for the reader to refuse.
+    """
+    zeta = -poles.real / np.abs(poles)
+    return np.where((zeta < 0) & (zeta > -ROUNDING_DAMPING), 0.0, zeta)
+
+
 @dataclass(frozen=True)
 class ModalBatch:
     """Modes of a model for a batch of parameter vectors at one axis position.
@@ -151,7 +167,7 @@ class ModalBatch:
             poles = self.poles[sample]
             keep = np.isfinite(poles) & (np.abs(poles) > 0)
             w = np.abs(poles[keep])
-            return ModalDataSet(dict(self.position), w / (2 * np.pi), -poles[keep].real / w,
+            return ModalDataSet(dict(self.position), w / (2 * np.pi), pole_damping(poles[keep]),
                                 self.complex_shapes[sample][:, keep])
         keep = self.frequency[sample] > 0
         return ModalDataSet(dict(self.position), self.frequency[sample][keep], self.damping[sample][keep],

@@ -45,6 +45,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
+from cappe.modal._batch import pole_damping
 from cappe.modal._engine import ModalEngine
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
@@ -155,6 +156,13 @@ def _mode_count(n_modes: int | None, available: int, nm: NumericModel) -> int:
     return int(n_modes)
 
 
+def no_sensors_message(structure: Structure) -> str:
+    """What to do about a model without sensor nodes, where modes are compared at sensor channels ``NODE:DIR``."""
+    body = structure.bodies[0].name if structure.bodies else "BODY"
+    return (f"model '{structure.name}' has no sensor nodes (no 'sensors:' list); add one to the model file, e.g. "
+            f"'sensors: [{{name: s1, body: {body}}}]' (a node at the body's origin, channels s1:x s1:y s1:z)")
+
+
 def reference_modes(
     model: NumericModel | Structure,
     *,
@@ -209,10 +217,7 @@ def reference_modes(
     level_d = _level(noise_damping, "noise_damping")
     level_s = _level(noise_shape, "noise_shape")
     if sensors is None and not nm.structure.sensors:
-        msg = (
-            f"model '{nm.structure.name}' has no sensor nodes (its 'sensors' list is empty); add sensors to the model "
-            "or pass sensors='dofs' for shapes at the generalized coordinates"
-        )
+        msg = f"{no_sensors_message(nm.structure)} (in Python, sensors='dofs' gives the shapes at the DOFs)"
         raise DataError(msg)
     pos = _positions(nm, positions)
     engine = ModalEngine(nm, sensors=sensors)
@@ -227,7 +232,7 @@ def reference_modes(
     for p, batch, lam in zip(pos, batches, poles, strict=True):
         w = np.abs(lam[columns])
         freq = w / (2 * np.pi)
-        zeta = -lam[columns].real / w
+        zeta = pole_damping(lam[columns])
         shapes = np.asarray(batch.complex_shapes)[0][:, columns]
         freq = freq * _factors(streams[0], freq, level_f, math.inf, "noise_frequency")
         zeta = zeta * _factors(streams[1], zeta, level_d, 1.0, "noise_damping")

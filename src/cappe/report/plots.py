@@ -8,6 +8,7 @@ from typing import Any
 import numpy as np
 
 from cappe._plotting import figure as _figure
+from cappe._plotting import log_frequency_axis as _log_frequency_axis
 from cappe._plotting import save as _save
 from cappe.sensitivity import landscape_plot, sobol_plot
 from cappe.systems.frf import FRFData
@@ -55,6 +56,7 @@ def bode_plot(frf: FRFData, path: str | Path, title: str = "") -> Path:
     ax_mag.set_ylabel("magnitude (dB)")
     ax_phase.set_ylabel("phase (deg)")
     ax_phase.set_xlabel("frequency (Hz)")
+    _log_frequency_axis(ax_phase, float(np.min(frf.freq[frf.freq > 0], initial=np.inf)), float(np.max(frf.freq)))
     ax_mag.legend(loc="best", fontsize=8)
     ax_mag.grid(True, which="both", alpha=0.3)
     ax_phase.grid(True, which="both", alpha=0.3)
