@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import os
+from pathlib import Path
+
 import pytest
 
 from cappe.model import load_model
@@ -59,3 +62,27 @@ def build_slide():
 @pytest.fixture(scope="session")
 def slide():
     return build_slide()
+
+
+def _realdata_folder() -> Path | None:
+    """The public measured data (``shared/realdata`` beside the checkout or above it; ``CAPPE_REALDATA`` wins)."""
+    if os.environ.get("CAPPE_REALDATA"):
+        return Path(os.environ["CAPPE_REALDATA"])
+    for parent in Path(__file__).resolve().parents:
+        candidate = parent / "shared" / "realdata"
+        if candidate.is_dir():
+            return candidate
+    return None
+
+
+@pytest.fixture(scope="session")
+def realdata() -> Path:
+    """Folder of the real measured data (see its SOURCES.md); skipped where absent, failed where CI promises it
+    (CAPPE_REQUIRE_SERVICES=1). The files are read in place, never copied into the repository."""
+    folder = _realdata_folder()
+    if folder is None or not (folder / "SOURCES.md").is_file():
+        reason = "the real measured data (shared/realdata, or CAPPE_REALDATA) are not on this machine"
+        if os.environ.get("CAPPE_REQUIRE_SERVICES") == "1":
+            pytest.fail(f"{reason}, and CAPPE_REQUIRE_SERVICES=1 requires them")
+        pytest.skip(reason)
+    return folder

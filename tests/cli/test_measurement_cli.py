@@ -118,7 +118,7 @@ def test_errors_and_exit_codes(capsys, tmp_path, impact_run):
     assert "--sensor OUTPUT=NODE:DIR" in err
     code, _, err = run(capsys, "extract-modes", frf_file, "--band", "20:400", "--sensor", "z=n1:x")
     assert code == 2
-    assert "--sensor names outputs ['z']" in err
+    assert "--sensor names channels ['z']" in err
     code, _, err = run(capsys, "extract-modes", tmp_path / "missing.uff", "--band", "20:400")
     assert code == 1
     assert "missing.uff" in err

@@ -112,3 +112,34 @@ def test_modal_file_with_byte_order_mark(tmp_path):
     path = tmp_path / "m.json"
     path.write_bytes(b"\xef\xbb\xbf" + json.dumps(good()).encode())
     assert read_modal_data(path).sensors == ("a:x", "b:x")
+
+
+def test_standard_deviations_round_trip(tmp_path):
+    # the optional per-mode std of extract-modes: frequency_std, damping_std (per mode) and shape_std (per mode,
+    # per sensor, laid out like shape_re)
+    doc = good()
+    doc["sets"][0]["frequency_std"] = [0.02]
+    doc["sets"][0]["damping_std"] = [0.001]
+    doc["sets"][0]["shape_std"] = [[0.01, 0.03]]
+    data = modal_data_from_mapping(doc)
+    s = data.sets[0]
+    np.testing.assert_array_equal(s.frequency_std, [0.02])
+    np.testing.assert_array_equal(s.shape_std, [[0.01], [0.03]])
+    write_modal_data(tmp_path / "m.json", data)
+    back = read_modal_data(tmp_path / "m.json").sets[0]
+    np.testing.assert_array_equal(back.damping_std, [0.001])
+    np.testing.assert_array_equal(back.shape_std, s.shape_std)
+    assert modal_data_from_mapping(good()).sets[0].frequency_std is None  # absent: unknown, not zero
+
+
+@pytest.mark.parametrize(("key", "value", "pattern"), [
+    ("frequency_std", [-0.1], r"sets\[0\].frequency_std must be >= 0 \(standard deviations\) \(m\.json, sets\[0\].frequency_std\)"),
+    ("damping_std", [0.1, 0.2], r"sets\[0\].damping_std must list 1 number\(s\); got 2"),
+    ("shape_std", [[0.1]], r"sets\[0\].shape_std\[0\] must list 2 number\(s\); got 1"),
+    ("shape_std", "x", r"sets\[0\].shape_std must list one row per mode \(1\)"),
+])
+def test_bad_standard_deviations(key, value, pattern):
+    doc = good()
+    doc["sets"][0][key] = value
+    with pytest.raises(DataError, match=pattern):
+        modal_data_from_mapping(doc, "m.json")

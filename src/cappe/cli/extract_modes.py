@@ -24,6 +24,12 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="driving-point pair for mass-normalized shapes (repeatable)")
     p.add_argument("--sensor", metavar="OUTPUT=NODE:DIR", action="append", default=[],
                    help="label an FRF output as a sensor DOF for the mode shapes, e.g. d1=n1:x (repeatable)")
+    p.add_argument("--reference-side", choices=["auto", "inputs", "outputs"], default="auto",
+                   help="references of the estimator: the measured inputs, or the outputs by reciprocity (roving "
+                        "hammer: shapes at the hammer points); auto (default) takes the side with fewer channels")
+    p.add_argument("--bootstrap", type=int, default=50, metavar="N",
+                   help="bootstrap replicates for the standard deviations of frequency, damping and shapes "
+                        "(default 50; 0 skips them)")
     p.add_argument("--uff", metavar="FILE.uff", help="also write the modes as UFF 55 (outputs must be NODE:DIR)")
     p.add_argument("--plot", metavar="FILE.png", help="stabilization diagram with the selected poles")
     add_output_options(p)
@@ -37,12 +43,19 @@ def run(args: argparse.Namespace) -> int:
 
     frf = read_frf(args.frf)
     labels = text_pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
-    unknown = sorted(set(labels) - set(frf.output_names))
+    # by reciprocity (a roving hammer) the shapes are at the inputs: --sensor may label inputs as well
+    unknown = sorted(set(labels) - set(frf.output_names) - set(frf.input_names))
     if unknown:
-        msg = f"--sensor names outputs {unknown} that {args.frf} lacks; its outputs are {list(frf.output_names)}"
+        msg = (f"--sensor names channels {unknown} that {args.frf} lacks; its outputs are "
+               f"{list(frf.output_names)}, its inputs {list(frf.input_names)}")
         raise UsageError(msg)
-    frf = replace(frf, output_names=tuple(labels.get(name, name) for name in frf.output_names))
-    unlabelled = [name for name in frf.output_names if ":" not in name]
+    frf = replace(frf, output_names=tuple(labels.get(name, name) for name in frf.output_names),
+                  input_names=tuple(labels.get(name, name) for name in frf.input_names))
+    if args.bootstrap < 0 or args.bootstrap == 1:
+        msg = f"--bootstrap must be 0 (no standard deviations) or at least 2; got {args.bootstrap}"
+        raise UsageError(msg)
+    shape_points = frf.input_names if _reciprocal(frf, args.reference_side) else frf.output_names
+    unlabelled = [name for name in shape_points if ":" not in name]
     if args.uff and unlabelled:
         msg = (f"--uff needs every FRF output as a NODE:DIR sensor label; label {unlabelled} with "
                f"--sensor OUTPUT=NODE:DIR (e.g. --sensor {unlabelled[0]}=n1:x)")
@@ -55,10 +68,11 @@ def run(args: argparse.Namespace) -> int:
         msg = f"--near must be a comma-separated list of frequencies in Hz; got {args.near!r}"
         raise UsageError(msg) from exc
     pairs = text_pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
-    driving = {inp: labels.get(out, out) for inp, out in pairs.items()}
+    driving = {labels.get(inp, inp): labels.get(out, out) for inp, out in pairs.items()}
     result = extract_modes(
         frf, band=lo_hi, max_order=args.max_order, n_modes=args.n_modes, method=args.method,
-        selection=selection, driving_points=driving or None,
+        selection=selection, driving_points=driving or None, reference_side=args.reference_side,
+        n_bootstrap=args.bootstrap,
     )
     modal = result.to_modal_data()
     data = result.to_dict()
@@ -74,11 +88,34 @@ def run(args: argparse.Namespace) -> int:
         stabilization_plot(result.diagram, args.plot, frf=frf, selected=result.selection)
         data["plot"] = args.plot
     lines = [f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
-             f"{args.max_order}):", "   mode   frequency (Hz)   damping (%)   support"]
-    for k, (f, z, n) in enumerate(zip(result.frequency, result.damping, result.selection.support, strict=True)):
-        lines.append(f"  {k + 1:5d}   {f:14.4f}   {100 * z:11.4f}   {n:7d}")
+             f"{args.max_order}):"]
+    if result.reciprocity:
+        lines.append(f"read by reciprocity: reference {', '.join(result.fit.input_names)}; shapes at the "
+                     f"{len(result.fit.output_names)} excitation points {', '.join(result.fit.output_names)}")
+    f_std = result.frequency_std if result.frequency_std is not None else [float("nan")] * result.fit.n_modes
+    z_std = result.damping_std if result.damping_std is not None else [float("nan")] * result.fit.n_modes
+    lines.append("   mode   frequency (Hz)      std   damping (%)       std   support")
+    for k, (f, fs, z, zs, n) in enumerate(
+            zip(result.frequency, f_std, result.damping, z_std, result.selection.support, strict=True)):
+        lines.append(f"  {k + 1:5d}   {f:14.4f} {_std(fs, 8, 4)}   {100 * z:11.4f} {_std(100 * zs, 9, 4)}   {n:7d}")
+    if result.n_bootstrap:
+        lines.append(f"std: {result.n_bootstrap} bootstrap replicates over the fit's residuals")
+    else:
+        lines.append("std: not estimated (--bootstrap 0)")
+    lines.extend(f"warning: {w}" for w in result.warnings)
     if args.out:
         lines.append(f"wrote {args.out} (cappe.modal/1)")
     # -o receives the modal data contract (cappe.modal/1), not this summary: print only
     emit(argparse.Namespace(**{**vars(args), "out": None}), data, "\n".join(lines))
     return 0
+
+
+def _reciprocal(frf: object, side: str) -> bool:
+    """Whether extract_modes reads ``frf`` by reciprocity (the same rule, for the checks made before it runs)."""
+    from cappe.identify._lsfd import _reference_side
+
+    return _reference_side(frf, side)  # type: ignore[arg-type]
+
+
+def _std(value: float, width: int, digits: int) -> str:
+    return f"{value:{width}.{digits}f}" if value == value else f"{'-':>{width}}"

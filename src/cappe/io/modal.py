@@ -5,9 +5,12 @@
     {"format": "cappe.modal/1",
      "sensors": ["tool:x", "tool:y", ...],
      "sets": [{"position": {"z": -0.294}, "frequency": [Hz, ...], "damping": [ratio, ...],
-               "shape_re": [[per sensor] per mode], "shape_im": [[...] per mode]}, ...]}
+               "shape_re": [[per sensor] per mode], "shape_im": [[...] per mode],
+               "frequency_std": [Hz, ...], "damping_std": [ratio, ...], "shape_std": [[per sensor] per mode]},
+              ...]}
 
-``shape_im`` may be omitted for real shapes. The data types, :class:`~cappe.systems.ModalData` and
+``shape_im`` may be omitted for real shapes. The standard deviations are optional (written by ``cappe
+extract-modes``, estimated from the measured data); each is >= 0. The data types, :class:`~cappe.systems.ModalData` and
 :class:`~cappe.systems.ModalDataSet`, live in :mod:`cappe.systems.modal`; this module reads, validates and writes
 them (and hands them on under their old names, ``cappe.io.modal.ModalData``).
 """
@@ -64,6 +67,34 @@ def _required(raw: Mapping[str, Any], key: str, entry: str, source: str) -> Any:
         msg = f"{entry}.{key} is missing {_where(source, entry)}"
         raise DataError(msg)
     return raw[key]
+
+
+def _non_negative(value: object, what: str, source: str, *, length: int) -> NDArray[np.float64]:
+    values = _numbers(value, what, source, length=length)
+    if np.any(values < 0):
+        msg = f"{what} must be >= 0 (standard deviations) {_where(source, what)}"
+        raise DataError(msg)
+    return values
+
+
+def _standard_deviations(
+    raw: Mapping[str, Any], entry: str, source: str, m: int, n_s: int
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The optional ``frequency_std``, ``damping_std`` (one per mode) and ``shape_std`` (per mode, per sensor)."""
+    freq_std = damping_std = shape_std = None
+    if raw.get("frequency_std") is not None:
+        freq_std = _non_negative(raw["frequency_std"], f"{entry}.frequency_std", source, length=m)
+    if raw.get("damping_std") is not None:
+        damping_std = _non_negative(raw["damping_std"], f"{entry}.damping_std", source, length=m)
+    rows = raw.get("shape_std")
+    if rows is not None:
+        if isinstance(rows, (str, bytes)) or not isinstance(rows, Sequence) or len(rows) != m:
+            msg = f"{entry}.shape_std must list one row per mode ({m}) {_where(source, entry)}"
+            raise DataError(msg)
+        shape_std = np.array(
+            [_non_negative(row, f"{entry}.shape_std[{r}]", source, length=n_s) for r, row in enumerate(rows)]
+        ).T.reshape(n_s, m)
+    return freq_std, damping_std, shape_std
 
 
 def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalData:
@@ -135,7 +166,8 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
                 raise DataError(msg)
             for r, row in enumerate(rows):
                 shapes[:, r] += part * _numbers(row, f"{entry}.{name}[{r}]", source, length=n_s)
-        sets.append(ModalDataSet(pos, freq, damping, shapes))
+        stds = _standard_deviations(raw, entry, source, m, n_s)
+        sets.append(ModalDataSet(pos, freq, damping, shapes, *stds))
     return ModalData(tuple(sensors), tuple(sets), source)
 
 

@@ -61,7 +61,7 @@ def modal_features(
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         try:
-            found = extract_modes(frf, band=band, max_order=max_order)
+            found = extract_modes(frf, band=band, max_order=max_order, n_bootstrap=0)  # features need no std
         except DataError as exc:
             return freq, zeta, [f"modal extraction failed: {exc}"]
     notes.extend(f"modal extraction: {w.message}" for w in caught)

@@ -101,6 +101,53 @@ class FRFData:
         """
         return np.asarray(self.H[self.output_names.index(output), self.input_names.index(input)], dtype=complex)
 
+    def reciprocal(self) -> FRFData:
+        """The same FRFs read by Maxwell-Betti reciprocity, ``H_oi = H_io``: inputs become outputs and back.
+
+        A roving-hammer test (one accelerometer, the hammer moved over N points) measures one output and N inputs;
+        read by reciprocity it is N responses to one reference, which is what a poly-reference estimator and the
+        mode shapes over the hammer points need. Reciprocity holds for symmetric M, C, K (no gyroscopic or
+        circulatory terms) when every input is a force and every output the same response quantity at the matching
+        location and direction.
+
+        Returns
+        -------
+        FRFData
+            ``H`` of shape (n_in, n_out, n_freq); every new output carries the original outputs' common quantity.
+
+        Raises
+        ------
+        DataError
+            The outputs measure different quantities (the transposed FRFs would mix them within one output).
+
+        Examples
+        --------
+        >>> import numpy as np
+        >>> frf = FRFData(np.array([1.0, 2.0]), np.ones((1, 3, 2), dtype=complex), ("1:+x", "2:+x", "3:+x"),
+        ...               ("1:+x",), ("acceleration",))
+        >>> back = frf.reciprocal()
+        >>> back.output_names, back.input_names, back.output_quantities
+        (('1:+x', '2:+x', '3:+x'), ('1:+x',), ('acceleration', 'acceleration', 'acceleration'))
+        """
+        kinds = set(self.output_quantities)
+        if len(kinds) > 1:
+            msg = (
+                f"FRFs can be read by reciprocity only when every output measures the same quantity; got "
+                f"{dict(zip(self.output_names, self.output_quantities, strict=True))}"
+            )
+            raise DataError(msg)
+        quantities = (kinds.pop(),) * len(self.input_names) if kinds else ()
+        coherence = None if self.coherence is None else np.asarray(self.coherence).transpose(1, 0, 2)
+        return FRFData(
+            freq=self.freq,
+            H=np.asarray(self.H).transpose(1, 0, 2),
+            input_names=self.output_names,
+            output_names=self.input_names,
+            output_quantities=quantities,
+            coherence=coherence,
+            window_decay=self.window_decay,
+        )
+
     def to_dict(self) -> dict[str, Any]:
         pairs = []
         for o, out in enumerate(self.output_names):

@@ -158,12 +158,21 @@ class ModalDataSet:
         Damping ratios.
     shapes : ndarray of complex, shape (n_sensors, n_modes)
         Mode shapes at the sensors, one mode per column.
+    frequency_std, damping_std : ndarray, shape (n_modes,), optional
+        Standard deviations of the frequencies (Hz) and damping ratios estimated from the measured data (modal
+        extraction: a bootstrap over the fit's residuals); None when unknown (simulated or older files).
+    shape_std : ndarray, shape (n_sensors, n_modes), optional
+        Standard deviation of each shape component (the modulus of its complex deviation, in the shapes'
+        scaling); None when unknown.
     """
 
     position: dict[str, float]
     frequency: NDArray[np.float64]
     damping: NDArray[np.float64]
     shapes: NDArray[np.complex128]
+    frequency_std: NDArray[np.float64] | None = None
+    damping_std: NDArray[np.float64] | None = None
+    shape_std: NDArray[np.float64] | None = None
 
     @property
     def n_modes(self) -> int:
@@ -183,6 +192,9 @@ class ModalDataSet:
             "damping": self.damping.tolist(),
             "shape_re": self.shapes.real.T.tolist(),
             "shape_im": self.shapes.imag.T.tolist(),
+            **({} if self.frequency_std is None else {"frequency_std": self.frequency_std.tolist()}),
+            **({} if self.damping_std is None else {"damping_std": self.damping_std.tolist()}),
+            **({} if self.shape_std is None else {"shape_std": self.shape_std.T.tolist()}),
         }
 
 
