@@ -31,6 +31,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--setting", metavar="NAME=VALUE", action="append", default=[],
                    help="method setting, e.g. instruments=model, passes=8, strategy=differential-evolution "
                         "(repeatable; VALUE is JSON or a plain string)")
+    p.add_argument("--intersample", choices=["zoh", "foh", "bl"],
+                   help="time data: the inputs between samples. Default bl (band-limited), what a DAQ with an "
+                        "anti-alias filter records, for one-step and two-step; ekf and ukf model a held input (zoh) "
+                        "only; direct needs no assumption")
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
     p.add_argument("--plot-landscape", metavar="A,B:FILE.png",
                    help="the method's cost over unknowns A and B around the optimum (least-squares methods)")
@@ -102,7 +106,16 @@ def run(args: argparse.Namespace) -> int:
     start = read_parameters(args.start) if args.start else None
     cls = estimator_class(args.method)
     options = settings(args.setting)
-    if "position" in inspect.signature(cls.__init__).parameters:
+    takes = inspect.signature(cls.__init__).parameters
+    if "intersample" in takes and have == "time":
+        options.setdefault("intersample", args.intersample or "bl")
+    elif args.intersample not in (None, "zoh") or (args.intersample and have != "time"):
+        msg = (
+            f"--intersample {args.intersample} does not apply to method {args.method!r} on {have} data"
+            + (" (it models a held input, zoh)" if have == "time" else "")
+        )
+        raise UsageError(msg)
+    if "position" in takes:
         options.setdefault("position", ctx.position)
     elif args.position:  # the modal methods take each set's position from the reference data
         msg = (

@@ -26,7 +26,8 @@ from cappe.cli._common import JSON_OUT, TIME_OUT, ModelContext, UsageError, add_
 
 SIGNALS = ("random", "periodic-random", "chirp", "prbs", "impact", "sine:FREQ", "square:FREQ")
 #: Time-simulation options and their defaults (None on the command line means "not given").
-TIME_DEFAULTS = {"fs": 2048.0, "duration": 8.0, "amplitude": 10.0, "outputs": None, "noise": 0.0, "input_noise": 0.0}
+TIME_DEFAULTS = {"fs": 2048.0, "duration": 8.0, "amplitude": 10.0, "outputs": None, "noise": 0.0, "input_noise": 0.0,
+                 "intersample": "bl"}
 #: Reference-data options, by their command-line spelling.
 MODAL_OPTIONS = {
     "positions": "--positions", "modes": "--modes", "noise_frequency": "--noise-frequency",
@@ -60,6 +61,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     time.add_argument("--outputs", metavar="LIST", help="comma-separated model outputs to record (default all)")
     time.add_argument("--noise", type=float, help="output noise, fraction of channel RMS (0.01 = 1 %%)")
     time.add_argument("--input-noise", type=float, help="noise on the recorded inputs, fraction of RMS")
+    time.add_argument("--intersample", choices=["zoh", "foh", "bl"],
+                      help="the force between samples: bl (default) band-limited, as a DAQ with an anti-alias filter "
+                           "records it; foh linear; zoh held (a DAC or PRBS without reconstruction filter)")
     p.add_argument("--band", metavar="LO:HI",
                    help="Hz; time data: excitation band of random and chirp signals (default 0:fs/2.56); "
                         "reference data: FRF band (default 0 to 1.25 x the highest mode)")
@@ -182,7 +186,7 @@ def _run_time(args: argparse.Namespace) -> int:
     n = min(v.size for v in channels.values())
     excitation = TimeData.from_rate(args.fs, {name: v[:n] for name, v in channels.items()})
     data = time_response(system, excitation, outputs=names(args.outputs), noise=args.noise,
-                         input_noise=args.input_noise, rng=streams[-1])
+                         input_noise=args.input_noise, rng=streams[-1], intersample=args.intersample)
     summary = {
         "model": ctx.structure.name,
         "fs": data.fs,
@@ -192,9 +196,11 @@ def _run_time(args: argparse.Namespace) -> int:
         "rms": {c: float(np.sqrt(np.mean(v**2))) for c, v in zip(data.channels, data.values, strict=True)},
         "excitation": dict(item.partition("=")[::2] for item in args.excite),
         "noise": args.noise,
+        "intersample": args.intersample,
         "seed": args.seed,
     }
-    lines = [f"{ctx.structure.name}: {data.n_samples} samples at {data.fs:g} Hz ({data.duration:g} s)"]
+    lines = [f"{ctx.structure.name}: {data.n_samples} samples at {data.fs:g} Hz ({data.duration:g} s), "
+             f"force between samples: {args.intersample}"]
     lines += [f"  {c:>10s}  rms {summary['rms'][c]:.4g} {u}" for c, u in zip(data.channels, data.units, strict=True)]
     if args.out:
         write_time_data(args.out, data)

@@ -67,6 +67,7 @@ from cappe.model.numeric import ParamsLike
 from cappe.systems.dynamic_stiffness import frf_lines
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.statespace import band_limited_response, check_intersample, hold_weights
 from cappe.systems.timedata import TimeData
 
 __all__ = ["FRFDerivatives", "OneStepEstimator", "OneStepFRFEstimator", "frf_derivatives"]
@@ -235,12 +236,13 @@ class _TimeModel:
     """Zero-order-hold simulation of a model's outputs to recorded inputs, in modal coordinates."""
 
     def __init__(self, model: NumericModel, position: Mapping[str, float] | None, inputs: Sequence[str],
-                 outputs: Sequence[str], dt: float) -> None:
+                 outputs: Sequence[str], dt: float, intersample: str = "zoh") -> None:
         self.model = model
         self.position = position
         self.inputs = list(inputs)
         self.outputs = list(outputs)
         self.dt = dt
+        self.intersample = intersample
 
     def modes(self, params: Array, scale: Array) -> _Modes:
         system = self.model.system(params, self.position)
@@ -260,36 +262,63 @@ class _TimeModel:
 
     def drive(self, modes: _Modes, u: Array, delay: float) -> tuple[CArray, Array]:
         """Modal drive ``g`` (N, m) with ``z[k+1] = mu z[k] + g[k]`` for an input delayed by ``delay`` samples
-        (exact for a zero-order-hold input), and the input seen by the direct feedthrough at the samples (N, n_in).
+        (exact for a held input; for a linear one with ``intersample`` "foh" and "bl", the band-limited case's
+        stand-in in the continuation stages), and the input seen by the direct feedthrough at the samples (N, n_in).
         """
         n = int(np.floor(delay))
         f = float(delay - n)
         lam, dt = modes.lam, self.dt
         ub = u @ modes.bm.T  # (N, m)
-        safe = np.where(lam == 0, 1.0, lam)
-
-        def integral(h: float) -> CArray:  # int_0^h e^{lam s} ds
-            return np.asarray(np.where(lam == 0, h, np.expm1(lam * h) / safe), dtype=complex)
-
-        g0 = integral((1.0 - f) * dt)
-        g = _shift(ub, n) * g0
         held = _shift(u, n)
         if f > 0:
-            g1 = np.exp(lam * (1.0 - f) * dt) * integral(f * dt)
-            g = g + _shift(ub, n + 1) * g1
-            # direct feedthrough (acceleration outputs): the held input jumps at the sample instants; linear
-            # interpolation keeps the output continuous in the delay (exact at whole samples)
+            # the delayed input at the samples lies between two of the record's samples: linear interpolation
+            # (for a held input it keeps the direct feedthrough continuous in the delay, exact at whole samples)
             held = (1.0 - f) * held + f * _shift(u, n + 1)
+        mu_rest = np.exp(lam * (1.0 - f) * dt)
+        if self.intersample == "zoh":
+            # held u[k-n-1] for f dt, then u[k-n] for (1 - f) dt
+            g = _shift(ub, n) * hold_weights(lam, (1.0 - f) * dt, "zoh")[0]
+            if f > 0:
+                g = g + _shift(ub, n + 1) * (mu_rest * hold_weights(lam, f * dt, "zoh")[0])
+            return g, held
+        # linear input, delayed: over [k dt, (k + f) dt] from e_k to u[k-n], then to e_{k+1}, where
+        # e_k = f u[k-n-1] + (1 - f) u[k-n] is the delayed input at the sample
+        a0, a1 = hold_weights(lam, f * dt, "foh")
+        b0, b1 = hold_weights(lam, (1.0 - f) * dt, "foh")
+        e_now = (1.0 - f) * _shift(ub, n) + f * _shift(ub, n + 1)
+        e_next = (1.0 - f) * _shift(ub, n - 1) + f * _shift(ub, n)
+        g = e_now * (mu_rest * a0) + _shift(ub, n) * (mu_rest * a1 + b0) + e_next * b1
         return g, held
 
     def simulate(self, modes: _Modes, u: Array, delay: float) -> Array:
         """Outputs (N, n_out), divided by the record's scale, from rest."""
+        if self.intersample == "bl":
+            return self._band_limited(modes, u, delay)
         g, held = self.drive(modes, u, delay)
         mu = np.exp(modes.lam * self.dt)
         z = np.empty_like(g)
         for i, m in enumerate(mu):
             z[:, i] = sig.lfilter([0.0, 1.0], [1.0, -m], g[:, i])
         return np.asarray((z @ modes.cm.T).real + held @ modes.d.T)
+
+    def _band_limited(self, modes: _Modes, u: Array, delay: float) -> Array:
+        """Outputs for a band-limited input delayed by ``delay`` samples (exact: the delay is a linear phase)."""
+        lam, res = modes.lam, modes.cm[:, :, None] * modes.bm[None, :, :]  # (n_out, m, n_in), weights included
+        tau = delay * self.dt
+        if lam.size and np.any(lam.real >= 0):
+            msg = "the model has an undamped or unstable mode; a band-limited simulation needs every mode to decay"
+            raise ModelError(msg)
+
+        def transfer(omega: Array) -> CArray:
+            jw = 1j * omega[:, None]
+            # each kept mode stands for itself and its conjugate (weight 2 in cm) or is real (weight 1):
+            # 0.5 (r / (jw - lam) + conj(r) / (jw - conj(lam))) covers both
+            h = 0.5 * (np.einsum("oml,fm->fol", res, 1.0 / (jw - lam[None, :]))
+                       + np.einsum("oml,fm->fol", res.conj(), 1.0 / (jw - lam.conj()[None, :])))
+            return np.asarray((h + modes.d[None]) * np.exp(-1j * omega * tau)[:, None, None])
+
+        decay = float(np.min(-lam.real)) if lam.size else 1.0 / self.dt
+        return band_limited_response(transfer, u, self.dt, decay)
 
     def segments(self, modes: _Modes, u: Array, delay: float, sigma: float, length: int) -> tuple[Array, Array]:
         """Exponentially weighted zero-state responses of consecutive segments (n_seg, length, n_out), and the
@@ -368,6 +397,11 @@ class OneStepEstimator(Estimator):
     starts : int
         Number of starts: the start, plus random points in the bounds (drawn with ``rng``); all enter the first
         stage and the lowest cost continues.
+    intersample : {"zoh", "foh", "bl"}
+        The inputs between samples (:mod:`cappe.systems.statespace`): held (default, as
+        :func:`cappe.systems.time_response` simulates by default), linear, or band-limited (what a DAQ with an
+        anti-alias filter records; the final fit is then exact in the frequency domain, the continuation stages
+        use the linear input).
 
     Attributes
     ----------
@@ -408,6 +442,7 @@ class OneStepEstimator(Estimator):
         initial_state: bool = False,
         continuation: Sequence[float] = CONTINUATION,
         starts: int = 1,
+        intersample: str = "zoh",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -419,6 +454,7 @@ class OneStepEstimator(Estimator):
         self.initial_state = initial_state
         self.continuation = continuation
         self.starts = starts
+        self.intersample = intersample
 
     # -- data --------------------------------------------------------------------------------------------------
     def _records(self, model: NumericModel, data: Any) -> tuple[list[str], list[str], float, list[_Record]]:
@@ -472,7 +508,7 @@ class OneStepEstimator(Estimator):
         if any(not (np.isfinite(z) and z > 0) for z in stages_zeta):
             msg = f"continuation must list artificial damping ratios > 0; got {list(self.continuation)!r}"
             raise DataError(msg)
-        sim = _TimeModel(model, self.position, inputs, outputs, dt)
+        sim = _TimeModel(model, self.position, inputs, outputs, dt, check_intersample(self.intersample))
         full, shift = _delay_space(space, max_delay if self.delay else None)
 
         def split(theta: Array) -> tuple[Array, float]:
@@ -544,6 +580,7 @@ class OneStepEstimator(Estimator):
             "rms": {n: [float(r.scale[c]) for r in records] for c, n in enumerate(outputs)},
             "samples": n_samples,
             "dt": dt,
+            "intersample": self.intersample,
         }
         if self.delay:
             std = float(result.std[space.n]) * dt

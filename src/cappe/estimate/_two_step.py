@@ -74,6 +74,7 @@ from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.statespace import check_intersample
 from cappe.systems.timedata import TimeData
 from cappe.systems.transfer import TransferFunctionModel
 from cappe.systems.zpk import ZeroPoleGainModel
@@ -425,15 +426,18 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> tuple[list
     tfs: dict[str, TransferFunctionModel] = {}
     for output in dict.fromkeys(p.output for p in pairs):
         order = next(p.order for p in pairs if p.output == output)
-        nk = 0 if order == 2 else 1
+        # a held input reaches a displacement or velocity one sample late; a linear one within the sample
+        nk = 0 if order == 2 or est.intersample != "zoh" else 1
         if est.identification == "oe":
             nb = n + 1 if nk == 0 else n
             oe = OE(nb=[nb] * len(inputs), nf=[n] * len(inputs), nk=[nk] * len(inputs)).fit(
                 data, inputs=inputs, output=output
             )
+            # a band-limited input has no finite-order discrete equivalent: its linear interpolation stands in
+            hold = "zoh" if est.intersample == "zoh" else "foh"
             for p in pairs:
                 if p.output == output:
-                    tfs[p.label] = oe.to_transfer_function(p.input, negative_real="reflect")
+                    tfs[p.label] = oe.to_transfer_function(p.input, negative_real="reflect", intersample=hold)
         else:
             na = int(est.arx_order)
             arx = ARX(na, [na] * len(inputs), [nk] * len(inputs)).fit(data, inputs=inputs, output=output)
@@ -486,6 +490,7 @@ class _TwoStep(Estimator):
         band: tuple[float, float] | None = None,
         weights: Mapping[str, float] | None = None,
         n_starts: int = 16,
+        intersample: str = "zoh",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.pairs = pairs
@@ -495,8 +500,14 @@ class _TwoStep(Estimator):
         self.band = band
         self.weights = weights
         self.n_starts = n_starts
+        self.intersample = intersample
 
     def _check_settings(self) -> None:
+        check_intersample(self.intersample)
+        if self.intersample != "zoh" and self.identification == "arx":
+            msg = (f"identification 'arx' (pruned, matched-z zeros) assumes a held input; got intersample "
+                   f"{self.intersample!r} (use identification 'oe')")
+            raise DataError(msg)
         if self.identification not in _IDENTIFICATIONS:
             msg = f"identification must be 'oe' or 'arx'; got {self.identification!r}"
             raise DataError(msg)
@@ -597,6 +608,11 @@ class TwoStepTFEstimator(_TwoStep):
         Factor on that pair's residuals (default 1).
     n_starts : int
         Start points: the start and ``n_starts - 1`` Sobol points inside the bounds.
+    intersample : {"zoh", "foh", "bl"}
+        The inputs between samples of time data (:mod:`cappe.systems.statespace`): step 1 converts its discrete
+        model by the exact inverse of the zero-order hold (default) or of the first-order hold; a band-limited input
+        has no finite-order discrete equivalent, so ``"bl"`` uses the first-order hold's (gain error about
+        ``(omega dt)^2 / 12`` at ``omega``).
 
     Attributes
     ----------
@@ -766,10 +782,12 @@ class TwoStepZPKEstimator(_TwoStep):
         weights: Mapping[str, float] | None = None,
         n_starts: int = 16,
         roots: str = "frequency-damping",
+        intersample: str = "zoh",
     ) -> None:
         super().__init__(
             model, unknowns, bounds=bounds, start=start, values=values, rng=rng, pairs=pairs, position=position,
             identification=identification, arx_order=arx_order, band=band, weights=weights, n_starts=n_starts,
+            intersample=intersample,
         )
         self.roots = roots
 

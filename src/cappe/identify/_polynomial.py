@@ -958,11 +958,17 @@ class PolynomialModel(Settings, ABC):
         return _roots(np.trim_zeros(self.B_[i], "f"))
 
     # -- continuous representations -------------------------------------------------------------------------------
-    def to_state_space(self, input: str | None = None, *, negative_real: str = "error") -> StateSpaceModel:  # noqa: A002
-        """Continuous state-space model whose zero-order-hold discretization is the identified ``B_i / (A F_i)``.
+    def to_state_space(self, input: str | None = None, *, negative_real: str = "error",  # noqa: A002
+                       intersample: str = "zoh") -> StateSpaceModel:
+        """Continuous state-space model whose zero-order-hold (or first-order-hold) discretization is the identified
+        ``B_i / (A F_i)``.
 
         The inverse of the ZOH map: with the discrete realization ``(Ad, Bd, Cd, Dd)``,
-        ``logm([[Ad, Bd], [0, I]]) / dt = [[A, B], [0, 0]]``, C and D unchanged.
+        ``logm([[Ad, Bd], [0, I]]) / dt = [[A, B], [0, 0]]``, C and D unchanged. The inverse of the FOH map
+        (:meth:`StateSpaceModel.discretize` with ``"foh"``): ``A = logm(Ad) / dt``,
+        ``B = (B_now + Ad B_next)^-1 Bd`` and ``D = Dd - C B_next B`` with the hold matrices of ``A``
+        (:func:`cappe.systems.statespace.hold_matrices`); fit the discrete model with ``nk = 0`` (a linear input
+        reaches the output within the sample).
 
         Parameters
         ----------
@@ -972,7 +978,12 @@ class PolynomialModel(Settings, ABC):
             A discrete pole on the negative real axis has no real continuous ZOH equivalent of the same order
             (it maps onto the Nyquist frequency). ``"error"`` raises ModelError; ``"reflect"`` moves such poles to
             ``|z|`` (same decay rate, no oscillation), keeps the static gain and warns IllConditionedWarning.
+        intersample : {"zoh", "foh"}
+            How the input behaved between the samples of the identification data.
         """
+        if intersample not in ("zoh", "foh"):
+            msg = f"intersample must be 'zoh' or 'foh' for a continuous equivalent; got {intersample!r}"
+            raise DataError(msg)
         if negative_real not in ("error", "reflect"):
             msg = f"negative_real must be 'error' or 'reflect'; got {negative_real!r}"
             raise DataError(msg)
@@ -1011,6 +1022,8 @@ class PolynomialModel(Settings, ABC):
             num = num * (dc * np.polyval(den, 1.0) / np.polyval(num, 1.0)) if np.polyval(num, 1.0) != 0 else num
         ad, bd, cd, dd = _observable_realization(num, den)
         n = ad.shape[0]
+        if intersample == "foh":
+            return self._from_first_order_hold(tf, ad, bd, cd, dd)
         big = np.zeros((n + 1, n + 1))
         big[:n, :n] = ad
         big[:n, n:] = bd
@@ -1030,11 +1043,29 @@ class PolynomialModel(Settings, ABC):
             (tf.output,),
         )
 
+    def _from_first_order_hold(self, tf: DiscreteTransferFunction, ad: NDArray[np.float64], bd: NDArray[np.float64],
+                               cd: NDArray[np.float64], dd: NDArray[np.float64]) -> StateSpaceModel:
+        """Continuous model whose FOH discretization is ``(ad, bd, cd, dd)`` (see :meth:`to_state_space`)."""
+        from cappe.systems.statespace import hold_matrices
+
+        n = ad.shape[0]
+        log = np.asarray(sla.logm(ad), dtype=complex) / self.dt_
+        if np.abs(log.imag).max() > 1e-6 * max(float(np.abs(log.real).max()), 1e-300):
+            msg = f"the matrix logarithm of the model from {tf.input!r} is not real; no continuous FOH equivalent"
+            raise ModelError(msg)
+        a = log.real
+        phi, b_now, b_next = hold_matrices(a, np.eye(n), self.dt_, "foh")
+        b = np.linalg.solve(b_now + phi @ b_next, np.asarray(bd, dtype=float))
+        c = np.asarray(cd, dtype=float)
+        d = np.asarray(dd, dtype=float) - c @ b_next @ b
+        return StateSpaceModel(a, b, c, d, None, (), (tf.input,), (tf.output,))
+
     def to_transfer_function(
         self,
         input: str | None = None,  # noqa: A002
         *,
         negative_real: str = "error",
+        intersample: str = "zoh",
     ) -> TransferFunctionModel:
         """Continuous transfer function (s in rad/s, monic denominator) of the ZOH equivalent.
 
@@ -1048,12 +1079,14 @@ class PolynomialModel(Settings, ABC):
             The input channel (may be omitted for a single-input model).
         negative_real : {"error", "reflect"}
             As for :meth:`to_state_space`.
+        intersample : {"zoh", "foh"}
+            As for :meth:`to_state_space`.
 
         Returns
         -------
         TransferFunctionModel
         """
-        tf = transfer_function(self.to_state_space(input, negative_real=negative_real))
+        tf = transfer_function(self.to_state_space(input, negative_real=negative_real, intersample=intersample))
         num = np.asarray(tf.numerator, dtype=float)
         omega_n = np.pi / self.dt_
         size = np.abs(num) * omega_n ** np.arange(num.size - 1, -1, -1, dtype=float)

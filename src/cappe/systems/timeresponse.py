@@ -10,6 +10,7 @@ from numpy.typing import NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
+from cappe.systems.statespace import check_intersample
 from cappe.systems.timedata import TimeData
 
 __all__ = ["OUTPUT_UNITS", "time_response"]
@@ -27,12 +28,14 @@ def time_response(
     noise: float = 0.0,
     input_noise: float = 0.0,
     rng: RandomLike = None,
+    intersample: str = "zoh",
 ) -> TimeData:
     """Simulated measurement: the system's outputs to the excitation, plus white noise, with the inputs.
 
-    The continuous system is discretized by zero-order hold at the excitation's sampling rate (exact for inputs
-    that are constant between samples) and started at rest. Hysteretic damping enters as its equivalent viscous
-    matrix at each mode (see :meth:`MechanicalSystem.state_space`).
+    The continuous system is started at rest and simulated exactly for the input between samples that
+    ``intersample`` names (:mod:`cappe.systems.statespace`): held (``"zoh"``, the default here), linear
+    (``"foh"``) or band-limited (``"bl"``, as a DAQ with an anti-alias filter records a force). Hysteretic
+    damping enters as its equivalent viscous matrix at each mode (see :meth:`MechanicalSystem.state_space`).
 
     Parameters
     ----------
@@ -50,6 +53,8 @@ def time_response(
         by the clean excitation.
     rng : int, Generator or None
         Seed for the noise.
+    intersample : {"zoh", "foh", "bl"}
+        The excitation between samples.
 
     Returns
     -------
@@ -87,7 +92,7 @@ def time_response(
     model_inputs = [mapping[c] for c in channels]
     ss = system.state_space(model_inputs, out_names)
     u = excitation.values[[excitation.index(c) for c in channels]].T
-    y, _ = ss.simulate(u, excitation.time)
+    y, _ = ss.simulate(u, excitation.time, intersample=check_intersample(intersample))
     gen = as_generator(rng)
     recorded_u = _with_noise(u, input_noise, gen)
     recorded_y = _with_noise(y, noise, gen)
