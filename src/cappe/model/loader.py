@@ -61,6 +61,7 @@ _TOP = {
     "parameters",
     "axes",
     "bodies",
+    "flexible_bodies",
     "elements",
     "inputs",
     "outputs",
@@ -70,13 +71,17 @@ _KEYS = {
     "parameters": ({"name", "value"}, {"unit", "kind", "bounds", "unknown", "disturbable", "description"}),
     "axes": ({"name"}, {"positions", "unit", "description"}),
     "bodies": ({"name", "mass"}, {"inertia", "position", "com", "dofs", "spin", "description"}),
+    "flexible_bodies": (
+        {"name", "mass", "stiffness", "nodes"},
+        {"position", "mass_scale", "stiffness_scale", "damping", "recovery", "description"},
+    ),
     "elements": ({"name", "bodies"}, {"points", "at", "axes", "stiffness", "damping", "loss", "description"}),
     "inputs": ({"name", "body"}, {"point", "direction", "kind"}),
     "outputs": ({"name"}, {"quantity", "body", "point", "direction", "rotation", "sensor", "element"}),
     "sensors": ({"name", "body"}, {"point"}),
 }
 # sensors are declared before outputs so that outputs can refer to them
-_ORDER = ("parameters", "axes", "bodies", "elements", "sensors", "inputs", "outputs")
+_ORDER = ("parameters", "axes", "bodies", "flexible_bodies", "elements", "sensors", "inputs", "outputs")
 
 
 def load_model(source: str | Path) -> Structure:
@@ -126,11 +131,12 @@ def load_model(source: str | Path) -> Structure:
         line = raw[: exc.start].count(b"\n") + 1
         msg = f"model file {label} is not UTF-8 text: byte 0x{raw[exc.start]:02x} at line {line} cannot be decoded"
         raise ModelError(msg) from exc
-    return structure_from_yaml(text, label)
+    return structure_from_yaml(text, label, base=path.parent)
 
 
-def structure_from_yaml(text: str, label: str = "<string>") -> Structure:
-    """Parse YAML model text; ``label`` names the file in error messages."""
+def structure_from_yaml(text: str, label: str = "<string>", *, base: Path | None = None) -> Structure:
+    """Parse YAML model text; ``label`` names the file in error messages, matrix files are read relative to
+    ``base``."""
     try:
         data = yaml.load(text, Loader=_SAFE_LOADER)
     except yaml.YAMLError:
@@ -141,7 +147,7 @@ def structure_from_yaml(text: str, label: str = "<string>") -> Structure:
     if not isinstance(data, Mapping):
         msg = f"model file {label} must contain a mapping at the top level; got {type(data).__name__}"
         raise ModelError(msg)
-    return structure_from_mapping(data, label)
+    return structure_from_mapping(data, label, base=base)
 
 
 def _parse_for_message(text: str, label: str) -> Any:
@@ -160,7 +166,8 @@ def _parse_for_message(text: str, label: str) -> Any:
         raise ModelError(msg) from exc
 
 
-def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") -> Structure:
+def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>", *, base: Path | None = None,
+                           ) -> Structure:
     """Build a Structure from the parsed content of a model file.
 
     Parameters
@@ -169,6 +176,9 @@ def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") ->
         The parsed ``cappe.model/1`` document.
     label : str
         Where it came from (a file name), for messages.
+    base : Path, optional
+        Folder that the matrix files of flexible bodies are read relative to (the model file's; default: the
+        working directory).
 
     Returns
     -------
@@ -191,7 +201,7 @@ def structure_from_mapping(data: Mapping[str, Any], label: str = "<mapping>") ->
     if not isinstance(name, str) or not name:
         msg = f"{label}: 'name' must be a non-empty string; got {name!r}"
         raise ModelError(msg)
-    builder = StructureBuilder(name, description=str(data.get("description", "") or ""), source=label)
+    builder = StructureBuilder(name, description=str(data.get("description", "") or ""), source=label, base=base)
     for group in _ORDER:
         entries = data.get(group, []) or []
         if not isinstance(entries, list):
@@ -228,6 +238,7 @@ _METHOD = {
     "parameters": "parameter",
     "axes": "axis",
     "bodies": "body",
+    "flexible_bodies": "flexible_body",
     "elements": "element",
     "inputs": "input",
     "outputs": "output",

@@ -363,18 +363,27 @@ class NumericModel:
         self._slices: dict[str, slice] = {}
         #: per coefficient, the terms it stands for (to name the model entry in an error)
         self._coefficient_sources: list[tuple[str, ...]] = []
+        #: per matrix, the numeric blocks of flexible bodies as flat patterns (n_blocks, n*n); their coefficients
+        #: follow the matrix's symbolic ones
+        self._block_patterns: dict[str, Array] = {}
         for name in MATRIX_NAMES:
             start = len(coefficients)
             coefficients.extend(self._plans[name].affine_coefficients)
             self._coefficient_sources.extend(self._plans[name].sources)
+            blocks = self.symbolic.block_terms[name]
+            coefficients.extend(term.coefficient for term in blocks)
+            self._coefficient_sources.extend((term.source,) for term in blocks)
+            self._block_patterns[name] = self._block_flat(blocks)
             self._slices[name] = slice(start, len(coefficients))
         self._coefficient_expressions = coefficients
         #: the coefficients that are an element's stiffness, damping or loss times stiffness: never negative
         self._nonnegative = np.concatenate([np.arange(self._slices[name].start, self._slices[name].stop)
                                             for name in ("K", "C", "H")]).astype(np.intp)
         #: per DOF, the model entry of its body (for messages)
-        self._dof_entries = tuple(self._location(f"bodies[{i}]") for i, b in enumerate(self.structure.bodies)
-                                  for _ in b.dofs)
+        self._dof_entries = (tuple(self._location(f"bodies[{i}]") for i, b in enumerate(self.structure.bodies)
+                                   for _ in b.dofs)
+                             + tuple(self._location(f"flexible_bodies[{i}]")
+                                     for i, f in enumerate(self.structure.flexible_bodies) for _ in range(f.n_dof)))
         all_symbols = self._param_symbols + self._axis_symbols
         self._n_coef = len(coefficients)
         self._coefficients = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
@@ -422,6 +431,17 @@ class NumericModel:
             if plan.residual is not None
         }
 
+    def _block_flat(self, blocks: Sequence[Any]) -> Array:
+        """Flexible bodies' numeric blocks placed in full (n, n) patterns, flattened: (n_blocks, n*n)."""
+        n = self.n_dof
+        out = np.zeros((len(blocks), n, n))
+        for t, term in enumerate(blocks):
+            size = term.block.shape[0]
+            out[t, term.offset:term.offset + size, term.offset:term.offset + size] = term.block
+        flat = out.reshape(len(blocks), n * n)
+        flat.setflags(write=False)
+        return flat
+
     def _compile_damping_sources(self) -> None:
         names: list[str] = []
         elements: list[str] = []
@@ -445,6 +465,21 @@ class NumericModel:
                     coefficients.append(coefficient)
                     elements.append(e.name)
                     rows.append(dense)
+        # flexible bodies: each damping block (symmetric, positive semi-definite) as a sum of rank-one sources
+        # d_i u_i u_i^T, so the first-order damping ratios and their derivatives treat them as they treat elements
+        fixed: list[Array] = []
+        for term in self.symbolic.block_terms["C"] + self.symbolic.block_terms["H"]:
+            weights, vectors = np.linalg.eigh(term.block)
+            keep = np.flatnonzero(weights > 1e-12 * max(float(abs(weights).max()), 1e-300))
+            for number, i in enumerate(keep, start=1):
+                row = np.zeros(self.n_dof)
+                row[term.offset:term.offset + vectors.shape[0]] = np.sqrt(weights[i]) * vectors[:, i]
+                fixed.append(row)
+                names.append(f"{term.source}{number}")
+                kinds.append("viscous" if term in self.symbolic.block_terms["C"] else "hysteretic")
+                coefficients.append(term.coefficient)
+                elements.append(term.source.rpartition(".")[0])
+        self._source_fixed_rows = np.array(fixed).reshape(len(fixed), self.n_dof)
         all_symbols = self._param_symbols + self._axis_symbols
         self.source_names = tuple(names)
         self.source_elements = tuple(elements)
@@ -526,7 +561,11 @@ class NumericModel:
                 rows[self._source_row_where] = np.asarray(self._source_rows(*p, *_scalars(pos)), dtype=float)
             if not np.isfinite(rows).all():
                 raise self._nonfinite_error(p[None, :], pos)
-        return rows.reshape(len(self.source_names), self.n_dof)
+        out = rows.reshape(len(self.source_names), self.n_dof)
+        n_fixed = self._source_fixed_rows.shape[0]
+        if n_fixed:
+            out[out.shape[0] - n_fixed:] = self._source_fixed_rows
+        return out
 
     def _plan(self, terms: list[Term]) -> _MatrixPlan:
         axis_set = set(self._axis_symbols)
@@ -639,6 +678,15 @@ class NumericModel:
         """The model entry of a term (``Term.source``, e.g. ``"shoe.kx"``) and what its coefficient is."""
         name, _, tail = source.rpartition(".")
         s = self.structure
+        flexible = [f.name for f in s.flexible_bodies]
+        if name in flexible:
+            here = f"flexible_bodies[{flexible.index(name)}]"
+            return {"mass": (f"{here}.mass_scale", "the mass scale"),
+                    "stiffness": (f"{here}.stiffness_scale", "the stiffness scale"),
+                    "alpha": (f"{here}.damping.rayleigh[0]", "alpha times the mass scale"),
+                    "beta": (f"{here}.damping.rayleigh[1]", "beta times the stiffness scale"),
+                    "eta": (f"{here}.damping.loss", "the loss factor times the stiffness scale"),
+                    }.get(tail.rstrip("0123456789"), (f"{here}.damping.modal", "the scale of its modal damping"))
         if tail == "mass" or tail == "spin" or tail.startswith("I"):
             here = f"bodies[{[b.name for b in s.bodies].index(name)}]"
             if tail == "spin":
@@ -691,6 +739,14 @@ class NumericModel:
                     vector(f"outputs[{i}].direction", out.direction)
             for i, sensor in enumerate(s.sensors):
                 vector(f"sensors[{i}].point", sensor.point)
+            for i, flex in enumerate(s.flexible_bodies):
+                here = f"flexible_bodies[{i}]"
+                found.append((f"{here}.mass_scale", "", flex.mass_scale))
+                found.append((f"{here}.stiffness_scale", "", flex.stiffness_scale))
+                found.extend((f"{here}.damping.{label}", "", v) for label, v in (
+                    ("rayleigh[0]", flex.damping.alpha), ("rayleigh[1]", flex.damping.beta),
+                    ("loss", flex.damping.eta)))
+                vector(f"{here}.position", flex.position)
             func = sp.lambdify(self._param_symbols + self._axis_symbols, [expr for *_, expr in found],
                                modules="numpy")
             self._entry_values = (found, func)
@@ -798,13 +854,16 @@ class NumericModel:
             n = self.n_dof
             cached = {}
             for name, (n_terms, where, func) in self._pattern_funcs.items():
-                flat = np.zeros(n_terms * n * n)
+                blocks = self._block_patterns[name]
+                flat = np.zeros((n_terms + blocks.shape[0]) * n * n)
                 if where.size:
                     with np.errstate(all="ignore"):
                         flat[where] = np.asarray(func(*_scalars(pos)), dtype=float)
                     if not np.isfinite(flat).all():  # the geometry is undefined at this position
                         raise self._nonfinite_error(None, pos)
-                cached[name] = flat.reshape(n_terms, n * n)
+                if blocks.shape[0]:
+                    flat[n_terms * n * n:] = blocks.reshape(-1)
+                cached[name] = flat.reshape(n_terms + blocks.shape[0], n * n)
             self._pattern_cache[pos] = cached
         return cached
 

@@ -29,6 +29,7 @@ import itertools
 import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from types import MappingProxyType
 from typing import Any
 
@@ -37,6 +38,15 @@ import sympy as sp
 
 from cappe.exceptions import ModelError
 from cappe.model._expressions import NAME_PATTERN, as_expression, shown, symbol
+from cappe.model.flexible import (
+    FlexibleBody,
+    InterfaceNode,
+    checked_matrices,
+    matrix_source,
+    modal_damping_matrix,
+    parse_damping,
+    parse_nodes,
+)
 
 __all__ = [
     "DIRECTIONS",
@@ -45,6 +55,7 @@ __all__ = [
     "QUANTITIES",
     "Axis",
     "Body",
+    "FlexibleBody",
     "Input",
     "Output",
     "Parameter",
@@ -332,6 +343,8 @@ class Structure:
         Free text.
     source : str
         The model file, for messages.
+    flexible_bodies : tuple of FlexibleBody
+        Bodies given by numeric FE matrices; their coordinates follow the rigid bodies'.
     """
 
     name: str
@@ -344,6 +357,7 @@ class Structure:
     sensors: tuple[Sensor, ...] = ()
     description: str = ""
     source: str = ""
+    flexible_bodies: tuple[FlexibleBody, ...] = ()
     _index: Mapping[str, Mapping[str, int]] = field(default_factory=dict, repr=False, compare=False)
 
     # -- look-ups ---------------------------------------------------------------------------------
@@ -357,12 +371,47 @@ class Structure:
 
     @property
     def dofs(self) -> tuple[str, ...]:
-        """Generalized coordinates as ``body.dof`` labels, bodies in order, then x y z rx ry rz."""
-        return tuple(f"{b.name}.{d}" for b in self.bodies for d in b.dofs)
+        """Generalized coordinates as ``body.dof`` labels, bodies in order, then x y z rx ry rz; then each flexible
+        body's (``bed.node.x``, ``bed.q1``)."""
+        return (tuple(f"{b.name}.{d}" for b in self.bodies for d in b.dofs)
+                + tuple(f"{f.name}.{d}" for f in self.flexible_bodies for d in f.dofs))
 
     @property
     def n_dof(self) -> int:
-        return sum(len(b.dofs) for b in self.bodies)
+        return sum(len(b.dofs) for b in self.bodies) + sum(f.n_dof for f in self.flexible_bodies)
+
+    def is_flexible(self, name: str) -> bool:
+        """Whether ``name`` is a flexible body.
+
+        Parameters
+        ----------
+        name : str
+            Body name.
+
+        Returns
+        -------
+        bool
+        """
+        return any(f.name == name for f in self.flexible_bodies)
+
+    def flexible_body(self, name: str) -> FlexibleBody:
+        """The flexible body of that name.
+
+        Parameters
+        ----------
+        name : str
+            Body name.
+
+        Returns
+        -------
+        FlexibleBody
+
+        Raises
+        ------
+        ModelError
+            The model has no such flexible body.
+        """
+        return self.flexible_bodies[self._lookup("flexible_bodies", name)]
 
     def parameter(self, name: str) -> Parameter:
         """The parameter of that name.
@@ -484,7 +533,8 @@ class Structure:
             index = {item.name: i for i, item in enumerate(getattr(self, group))}
         if name not in index:
             known = ", ".join(index) or "none"
-            msg = f"model '{self.name}' has no {group[:-1]} named {name!r}; known: {known}"
+            what = "flexible body" if group == "flexible_bodies" else group[:-1]
+            msg = f"model '{self.name}' has no {what} named {name!r}; known: {known}"
             raise ModelError(msg)
         return index[name]
 
@@ -635,6 +685,8 @@ class StructureBuilder:
         Free text.
     source : str
         The model file, named in error messages.
+    base : Path, optional
+        Folder that matrix files of flexible bodies are read relative to (the model file's).
 
     Examples
     --------
@@ -649,8 +701,10 @@ class StructureBuilder:
     1
     """
 
-    def __init__(self, name: str, *, description: str = "", source: str = "") -> None:
+    def __init__(self, name: str, *, description: str = "", source: str = "", base: Path | None = None) -> None:
         self.name = name
+        self.base = base
+        self._flexible: list[FlexibleBody] = []
         self.description = description
         self.source = source
         self._parameters: list[Parameter] = []
@@ -741,11 +795,12 @@ class StructureBuilder:
         """A global location expressed in ``body``'s frame (ground: unchanged)."""
         if body == GROUND:
             return location
-        origin = next(b.position for b in self._bodies if b.name == body)
+        positions = {b.name: b.position for b in self._bodies} | {f.name: f.position for f in self._flexible}
+        origin = positions[body]
         return tuple(sp.expand(location[i] - origin[i]) for i in range(3))  # type: ignore[return-value]
 
     def _require_body(self, name: object, where: str, *, allow_ground: bool) -> str:
-        known = [b.name for b in self._bodies]
+        known = [b.name for b in self._bodies] + [f.name for f in self._flexible]
         if allow_ground and name == GROUND:
             return GROUND
         if name not in known:
@@ -1035,6 +1090,146 @@ class StructureBuilder:
             )
             raise ModelError(msg)
 
+    def flexible_body(
+        self,
+        name: str,
+        *,
+        mass: object,
+        stiffness: object,
+        nodes: Sequence[Mapping[str, object]],
+        position: object = (0, 0, 0),
+        mass_scale: object = 1,
+        stiffness_scale: object = 1,
+        damping: Mapping[str, object] | None = None,
+        recovery: Mapping[str, object] | None = None,
+        description: str = "",
+        where: str | None = None,
+    ) -> None:
+        """Declare a flexible body: numeric (reduced) FE matrices with named interface nodes.
+
+        See :mod:`cappe.model.flexible` for the conventions (DOF order, damping models, scale factors).
+
+        Parameters
+        ----------
+        name : str
+            Body name.
+        mass, stiffness : array_like, sparse matrix, str or mapping
+            The matrices (kg, N/m; order n up to :data:`~cappe.model.flexible.MAX_FLEXIBLE_DOF`), or files
+            ``"bed_K.mtx"`` / ``{file: "bed.npz", key: "K"}`` (.mtx, .mat, .npz) relative to the model file.
+        nodes : list of mappings
+            Interface nodes ``{name, at: [x, y, z] (m, body frame), dofs: [x, y, ...], row: first row}``.
+        position : 3-vector of expressions
+            Origin of the body frame in global coordinates (m).
+        mass_scale, stiffness_scale : expression
+            Factors on the matrices (a parameter makes them identifiable).
+        damping : mapping, optional
+            ``{modal: ratio or [ratios]}``, ``{rayleigh: [alpha, beta]}`` or ``{loss: eta}``.
+        recovery : mapping, optional
+            ``{matrix: array or file spec (n_rec, n), nodes: [interior nodes, rows of the matrix]}``.
+        description : str
+            Free text.
+        where : str, optional
+            Location for error messages.
+
+        Raises
+        ------
+        ModelError
+            The name is taken or an entry breaks a rule (file, size, symmetry, definiteness, nodes).
+        """
+        where = self._here(where, "flexible_bodies", len(self._flexible))
+        if name == GROUND:
+            msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
+            raise ModelError(msg)
+        self._claim("bodies", name, where)
+        m, k = checked_matrices(matrix_source(mass, self.base, f"{where}.mass"),
+                                matrix_source(stiffness, self.base, f"{where}.stiffness"), where)
+        interface = parse_nodes(name, nodes, m.shape[0], f"{where}.nodes")
+        scales = {}
+        for label, value in (("mass_scale", mass_scale), ("stiffness_scale", stiffness_scale)):
+            expr = self._expr(value, f"{where}.{label}")
+            low = self._nominal_value(expr)
+            if low is not None and low <= 0:
+                msg = f"flexible body {name!r} {label} must be > 0; got {low:.6g} ({where}.{label})"
+                raise ModelError(msg)
+            scales[label] = expr
+        damp = parse_damping(name, damping, self._expr, self._nominal_value, f"{where}.damping")
+        interior: tuple[InterfaceNode, ...] = ()
+        rec = None
+        if recovery is not None:
+            if not isinstance(recovery, Mapping) or set(recovery) != {"matrix", "nodes"}:
+                msg = f"recovery must give 'matrix' and 'nodes'; got {recovery!r} ({where}.recovery)"
+                raise ModelError(msg)
+            raw = matrix_source(recovery["matrix"], self.base, f"{where}.recovery.matrix")
+            rec = np.array(raw.toarray() if hasattr(raw, "toarray") else raw, dtype=float)
+            if rec.ndim != 2 or rec.shape[1] != m.shape[0] or not np.isfinite(rec).all():
+                msg = (f"recovery matrix must be finite with {m.shape[0]} columns (the body's coordinates); got "
+                       f"shape {rec.shape} ({where}.recovery.matrix)")
+                raise ModelError(msg)
+            rec.setflags(write=False)
+            interior = parse_nodes(name, recovery["nodes"], rec.shape[0], f"{where}.recovery.nodes", interior=True)
+            clash = {n.name for n in interior} & {n.name for n in interface}
+            if clash:
+                msg = f"interior node(s) {', '.join(sorted(clash))} already name interface nodes ({where}.recovery)"
+                raise ModelError(msg)
+        modal = modal_damping_matrix(m, k, damp.ratios) if damp.kind == "modal" else None
+        if modal is not None:
+            modal.setflags(write=False)
+        self._flexible.append(
+            FlexibleBody(
+                name=name,
+                position=self._vector(position, f"{where}.position"),
+                mass=m,
+                stiffness=k,
+                nodes=interface,
+                interior=interior,
+                recovery=rec,
+                mass_scale=scales["mass_scale"],
+                stiffness_scale=scales["stiffness_scale"],
+                damping=damp,
+                modal_damping=modal,
+                description=str(description),
+            )
+        )
+
+    def _flexible_named(self, body: str) -> FlexibleBody | None:
+        return next((f for f in self._flexible if f.name == body), None)
+
+    def _point(self, body: str, value: object, where: str) -> Vector3:
+        """A point in ``body``'s frame: a 3-vector, or on a flexible body the name of one of its nodes."""
+        flex = self._flexible_named(body)
+        if flex is not None and isinstance(value, str):
+            node = flex.node(value)
+            if node is None:
+                known = ", ".join(n.name for n in (*flex.nodes, *flex.interior))
+                msg = f"flexible body {body!r} has no node {value!r}; its nodes: {known} ({where})"
+                raise ModelError(msg)
+            return tuple(sp.Float(v) for v in node.point)  # type: ignore[return-value]
+        return self._vector(value, where)
+
+    def _on_node(self, body: str, value: object, where: str, *, interior: bool) -> Vector3:
+        point = self._point(body, value, where)
+        self._check_on_node(body, point, where, interior=interior)
+        return point
+
+    def _check_on_node(self, body: str, point: Vector3, where: str, *, interior: bool) -> None:
+        """On a flexible body a point must be one of its nodes (interface nodes; interior ones for sensing)."""
+        flex = self._flexible_named(body)
+        if flex is None:
+            return
+        try:
+            coords = [float(v) for v in point]
+        except TypeError:
+            coords = None
+        if coords is None:
+            msg = (f"a point on flexible body {body!r} must be a fixed node; got {[str(v) for v in point]} "
+                   f"({where})")
+            raise ModelError(msg)
+        if flex.node_at(coords, interior=interior) is None:
+            kinds = "nodes" if interior else "interface nodes"
+            msg = (f"point {coords} is not at one of flexible body {body!r}'s {kinds} "
+                   f"({', '.join(n.name for n in (*flex.nodes, *(flex.interior if interior else ())))}) ({where})")
+            raise ModelError(msg)
+
     def element(
         self,
         name: str,
@@ -1107,8 +1302,11 @@ class StructureBuilder:
             if not isinstance(pts, (list, tuple)) or len(pts) != 2:
                 msg = f"element {name!r} points must be a pair of 3-vectors; got {points!r} ({where}.points)"
                 raise ModelError(msg)
-            point_a = self._vector(pts[0], f"{where}.points[0]")
-            point_b = self._vector(pts[1], f"{where}.points[1]")
+            point_a = self._point(a, pts[0], f"{where}.points[0]")
+            point_b = self._point(b, pts[1], f"{where}.points[1]")
+        for body_name, pt, k in ((a, point_a, 0), (b, point_b, 1)):
+            self._check_on_node(body_name, pt, f"{where}.{'at' if at is not None else f'points[{k}]'}",
+                                interior=False)
         frame = self._frame(name, axes, f"{where}.axes")
         groups = {
             label: self._directional(name, label, table or {}, f"{where}.{label}")
@@ -1217,7 +1415,7 @@ class StructureBuilder:
                 name=name,
                 kind=kind,
                 body=body_name,
-                point=self._vector(point, f"{where}.point"),
+                point=self._on_node(body_name, point, f"{where}.point", interior=False),
                 direction=self._vector(direction, f"{where}.direction", unit=True),
             )
         )
@@ -1296,7 +1494,7 @@ class StructureBuilder:
             body_name, pt = found[0].body, found[0].point
         else:
             body_name = self._require_body(body, f"{where}.body", allow_ground=False)
-            pt = self._vector(point, f"{where}.point")
+            pt = self._on_node(body_name, point, f"{where}.point", interior=True)
         self._outputs.append(
             Output(
                 name=name,
@@ -1330,14 +1528,15 @@ class StructureBuilder:
         where = self._here(where, "sensors", len(self._sensors))
         self._claim("sensors", name, where)
         body_name = self._require_body(body, f"{where}.body", allow_ground=False)
-        self._sensors.append(Sensor(name=name, body=body_name, point=self._vector(point, f"{where}.point")))
+        self._sensors.append(Sensor(name=name, body=body_name,
+                                    point=self._on_node(body_name, point, f"{where}.point", interior=True)))
 
     def build(self) -> Structure:
         """Validate the whole and return the immutable Structure."""
-        if not self._bodies:
+        if not self._bodies and not self._flexible:
             msg = f"model '{self.name}' has no bodies ({self.source or 'builder'})"
             raise ModelError(msg)
-        groups = ("parameters", "axes", "bodies", "elements", "inputs", "outputs", "sensors")
+        groups = ("parameters", "axes", "bodies", "elements", "inputs", "outputs", "sensors", "flexible_bodies")
         structure = Structure(
             name=self.name,
             parameters=tuple(self._parameters),
@@ -1349,6 +1548,7 @@ class StructureBuilder:
             sensors=tuple(self._sensors),
             description=self.description,
             source=self.source,
+            flexible_bodies=tuple(self._flexible),
         )
         index = {g: MappingProxyType({item.name: i for i, item in enumerate(getattr(structure, g))}) for g in groups}
         object.__setattr__(structure, "_index", MappingProxyType(index))

@@ -12,14 +12,17 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
 
+import numpy as np
 import sympy as sp
+from numpy.typing import NDArray
 
 from cappe.exceptions import ModelError
 from cappe.model._expressions import symbol
+from cappe.model.flexible import FlexibleBody
 from cappe.model.geometry import point_jacobian, skew
 from cappe.model.structure import DIRECTIONS, GROUND, Output, Structure
 
-__all__ = ["MATRIX_NAMES", "SymbolicModel", "Term", "derive"]
+__all__ = ["MATRIX_NAMES", "BlockTerm", "SymbolicModel", "Term", "derive"]
 
 MATRIX_NAMES = ("M", "C", "K", "G", "H")
 SparseRow = dict[int, sp.Expr]
@@ -38,6 +41,17 @@ class Term:
         for (i, j), v in self.pattern.items():
             out[i, j] += v
         return out
+
+
+@dataclass(frozen=True, eq=False)
+class BlockTerm:
+    """One additive term ``coefficient * block`` of a system matrix with a numeric block (a flexible body's
+    matrix) on the DOFs ``offset .. offset + n``."""
+
+    coefficient: sp.Expr
+    block: NDArray[np.float64]
+    offset: int
+    source: str
 
 
 def derive(structure: Structure) -> SymbolicModel:
@@ -83,6 +97,11 @@ class SymbolicModel:
         for body in structure.bodies:
             self._offset[body.name] = i
             i += len(body.dofs)
+        self._flexible: dict[str, FlexibleBody] = {}
+        for flex in structure.flexible_bodies:
+            self._offset[flex.name] = i
+            self._flexible[flex.name] = flex
+            i += flex.n_dof
 
     # -- kinematics -------------------------------------------------------------------------------
     def _columns(self, body: str) -> dict[int, int]:
@@ -108,6 +127,8 @@ class SymbolicModel:
         list of dict
             One sparse row ``{DOF index: sympy expression}`` per component.
         """
+        if body in self._flexible:
+            return self._flexible_rows(body, point, rotation=False)
         cols = self._columns(body)
         jac = point_jacobian(point)
         rows: list[SparseRow] = []
@@ -116,19 +137,26 @@ class SymbolicModel:
             rows.append(row)
         return rows
 
-    def rotation_rows(self, body: str) -> list[SparseRow]:
+    def rotation_rows(self, body: str, point: Sequence[sp.Expr] | None = None) -> list[SparseRow]:
         """Three sparse rows mapping q to the small rotation (rx, ry, rz) of a body.
 
         Parameters
         ----------
         body : str
             Body name.
+        point : sequence of 3 sympy expressions, optional
+            The point (m, body frame): the node whose rotation it is on a flexible body (unused on a rigid one).
 
         Returns
         -------
         list of dict
             One sparse row ``{DOF index: sympy expression}`` per component.
         """
+        if body in self._flexible:
+            if point is None:
+                msg = f"the rotation of flexible body {body!r} is a node's: name the point"
+                raise ModelError(msg)
+            return self._flexible_rows(body, point, rotation=True)
         cols = self._columns(body)
         return [{cols[3 + a]: sp.Integer(1)} if 3 + a in cols else {} for a in range(3)]
 
@@ -154,8 +182,10 @@ class SymbolicModel:
             rows_b = self.point_rows(e.body_b, e.point_b)
             rows_a = self.point_rows(e.body_a, e.point_a)
         else:
-            rows_b = self.rotation_rows(e.body_b)
-            rows_a = self.rotation_rows(e.body_a)
+            rows_b = self.rotation_rows(e.body_b, e.point_b)
+            rows_a = self.rotation_rows(e.body_a, e.point_a)
+        for body, rows in ((e.body_b, rows_b), (e.body_a, rows_a)):
+            self._require_components(body, rows, axis, k >= 3, f"element {element!r} direction {direction!r}")
         return _combine([(axis[a], rows_b[a]) for a in range(3)] + [(-axis[a], rows_a[a]) for a in range(3)])
 
     def direction_row(
@@ -179,8 +209,49 @@ class SymbolicModel:
         dict
             ``{DOF index: sympy expression}``.
         """
-        rows = self.rotation_rows(body) if rotation else self.point_rows(body, point)
+        rows = self.rotation_rows(body, point) if rotation else self.point_rows(body, point)
         return _combine([(direction[a], rows[a]) for a in range(3)])
+
+    def _flexible_rows(self, body: str, point: Sequence[sp.Expr], *, rotation: bool) -> list[SparseRow]:
+        """Rows of a flexible body's node at ``point``: its DOFs (interface node; a direction it does not carry
+        gives an empty row) or its rows of the recovery matrix (interior node)."""
+        flex = self._flexible[body]
+        try:
+            coords = [float(v) for v in point]
+        except TypeError as exc:
+            msg = f"a point on flexible body {body!r} must be a fixed node; got {[str(v) for v in point]}"
+            raise ModelError(msg) from exc
+        node = flex.node_at(coords)
+        if node is None:
+            msg = f"point {coords} is not at a node of flexible body {body!r}"
+            raise ModelError(msg)
+        start = self._offset[body]
+        names = DIRECTIONS[3:] if rotation else DIRECTIONS[:3]
+        interface = node in flex.nodes
+        rows: list[SparseRow] = []
+        for d in names:
+            r = node.row(d)
+            if r is None:
+                rows.append({})
+            elif interface:
+                rows.append({start + r: sp.Integer(1)})
+            else:
+                assert flex.recovery is not None  # interior nodes come with their recovery matrix
+                rows.append({start + j: sp.Float(float(v)) for j, v in enumerate(flex.recovery[r]) if v != 0})
+        return rows
+
+    def _require_components(self, body: str, rows: list[SparseRow], direction: Sequence[sp.Expr], rotation: bool,
+                            what: str) -> None:
+        """An element or input on a flexible body's node needs the node to carry every component it acts along
+        (a reduced model has no coordinate to hold the others at zero)."""
+        if body not in self._flexible:
+            return
+        names = ("rx", "ry", "rz") if rotation else ("x", "y", "z")
+        missing = [names[a] for a in range(3) if direction[a] != 0 and not rows[a]]
+        if missing:
+            msg = (f"{what} acts along {', '.join(missing)} on flexible body {body!r}, at a node without "
+                   f"{'those DOFs' if len(missing) > 1 else 'that DOF'}")
+            raise ModelError(msg)
 
     # -- matrices as terms ------------------------------------------------------------------------
     @cached_property
@@ -236,7 +307,22 @@ class SymbolicModel:
         block[3:, 3:] = -skew(spin.axis)
         return Term(spin.polar_inertia * spin.speed, _restrict(block, self._columns(name)), f"{name}.spin")
 
+    @cached_property
+    def block_terms(self) -> dict[str, list[BlockTerm]]:
+        """Additive terms of M, C, K, G and H with numeric blocks (flexible bodies), by matrix."""
+        out: dict[str, list[BlockTerm]] = {name: [] for name in MATRIX_NAMES}
+        for flex in self.structure.flexible_bodies:
+            for name, coefficient, block, source in flex.matrix_terms():
+                out[name].append(BlockTerm(coefficient, block, self._offset[flex.name], source))
+        return out
+
     def _assemble(self, name: str) -> sp.ImmutableMatrix:
+        if self.structure.flexible_bodies:
+            bodies = ", ".join(f.name for f in self.structure.flexible_bodies)
+            msg = (f"model '{self.structure.name}' has flexible bodies ({bodies}) given by numeric FE matrices: "
+                   "symbolic and exact matrices, transfer functions and Lagrange checks are for rigid-body models; "
+                   "use the numeric model (cappe model matrices/modes/frf)")
+            raise ModelError(msg)
         total = sp.zeros(self.n_dof, self.n_dof)
         for term in self.terms[name]:
             for (i, j), v in term.pattern.items():
@@ -286,7 +372,11 @@ class SymbolicModel:
             ``{DOF index: sympy expression}``.
         """
         inp = self.structure.input(name)
-        return self.direction_row(inp.body, inp.point, inp.direction, rotation=inp.kind == "moment")
+        moment = inp.kind == "moment"
+        if inp.body in self._flexible:
+            rows = self.rotation_rows(inp.body, inp.point) if moment else self.point_rows(inp.body, inp.point)
+            self._require_components(inp.body, rows, inp.direction, moment, f"input {name!r}")
+        return self.direction_row(inp.body, inp.point, inp.direction, rotation=moment)
 
     def output_row(self, name: str) -> tuple[str, SparseRow]:
         """(quantity, row) with the output's displacement-level value = row · q.

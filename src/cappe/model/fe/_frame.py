@@ -1,0 +1,277 @@
+"""A small 3-D frame generator: two-node Timoshenko (or Euler-Bernoulli) beam elements, sparse K and M.
+
+Why written here and not taken from PyPI: cappe needs the assembled sparse stiffness *and consistent mass*
+matrices of a 3-D frame as arrays, to reduce and couple them. anaStruct is 2-D and static; PyNite (3-D frames) and
+CALFEM's ``beam3e`` give static stiffness without a consistent mass; OpenSeesPy has both but runs as a global
+interpreter state in a native binary from which matrices are awkward to take out, a heavy dependency for ~200
+lines of textbook element matrices. The element here is Przemieniecki's (Theory of Matrix Structural Analysis,
+1968, ch. 5 and 11): Timoshenko stiffness with the shear parameters ``Phi = 12 E I / (kappa G A L^2)`` (``kappa``
+None gives Euler-Bernoulli), the consistent translational mass of the cubic interpolation, and rotary and
+torsional inertia with linear interpolation of the (independent) section rotations.
+
+DOFs per node: ``x y z rx ry rz`` (global), node ``i`` at rows ``6 i .. 6 i + 5``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.sparse as sps
+from numpy.typing import ArrayLike, NDArray
+
+from cappe.exceptions import ModelError
+
+__all__ = ["BeamSection", "FrameModel", "beam_element_matrices", "frame_model"]
+
+Array = NDArray[np.float64]
+_DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
+
+
+@dataclass(frozen=True)
+class BeamSection:
+    """Material and cross-section of a beam (SI).
+
+    Attributes
+    ----------
+    E : float
+        Young's modulus (Pa).
+    G : float
+        Shear modulus (Pa).
+    rho : float
+        Density (kg/m^3).
+    A : float
+        Area (m^2).
+    Iy, Iz : float
+        Second moments of area about the local y and z axes (m^4): Iy governs bending in the local x-z plane.
+    J : float
+        Torsion constant (m^4).
+    kappa : float or None
+        Shear coefficient (5/6 for a rectangle); None: Euler-Bernoulli (no shear deformation).
+    """
+
+    E: float  # noqa: N815 (the symbols of the literature)
+    G: float  # noqa: N815
+    rho: float
+    A: float  # noqa: N815
+    Iy: float  # noqa: N815
+    Iz: float  # noqa: N815
+    J: float  # noqa: N815
+    kappa: float | None = 5.0 / 6.0
+
+    @classmethod
+    def rectangle(cls, width: float, height: float, *, E: float, nu: float, rho: float,  # noqa: N803
+                  timoshenko: bool = True) -> BeamSection:
+        """A solid rectangle ``width`` (local y) by ``height`` (local z).
+
+        Parameters
+        ----------
+        width, height : float
+            Sides along local y and z (m).
+        E : float
+            Young's modulus (Pa).
+        nu : float
+            Poisson's ratio.
+        rho : float
+            Density (kg/m^3).
+        timoshenko : bool
+            Shear deformation with kappa = 5/6 (else Euler-Bernoulli).
+
+        Returns
+        -------
+        BeamSection
+
+        Examples
+        --------
+        >>> s = BeamSection.rectangle(0.1, 0.2, E=210e9, nu=0.3, rho=7850.0)
+        >>> round(s.Iy / s.Iz, 6)
+        4.0
+        """
+        a, b = max(width, height), min(width, height)
+        torsion = a * b**3 * (1 / 3 - 0.21 * b / a * (1 - b**4 / (12 * a**4)))  # Roark's approximation
+        return cls(E=E, G=E / (2 * (1 + nu)), rho=rho, A=width * height, Iy=width * height**3 / 12,
+                   Iz=height * width**3 / 12, J=torsion, kappa=5.0 / 6.0 if timoshenko else None)
+
+
+def beam_element_matrices(section: BeamSection, length: float) -> tuple[Array, Array]:
+    """Local 12 x 12 stiffness and mass of one element (DOFs u v w rx ry rz at node 1, then node 2).
+
+    Parameters
+    ----------
+    section : BeamSection
+        Material and section.
+    length : float
+        Element length (m).
+
+    Returns
+    -------
+    K, M : ndarray, shape (12, 12)
+    """
+    s, L = section, length  # noqa: N806
+    k = np.zeros((12, 12))
+    m = np.zeros((12, 12))
+    ax = s.E * s.A / L
+    k[np.ix_([0, 6], [0, 6])] = ax * np.array([[1, -1], [-1, 1]])
+    k[np.ix_([3, 9], [3, 9])] = s.G * s.J / L * np.array([[1, -1], [-1, 1]])
+
+    def bending(inertia: float, sign: float) -> Array:
+        phi = 0.0 if s.kappa is None else 12 * s.E * inertia / (s.kappa * s.G * s.A * L**2)
+        c = s.E * inertia / ((1 + phi) * L**3)
+        return c * np.array([
+            [12, sign * 6 * L, -12, sign * 6 * L],
+            [sign * 6 * L, (4 + phi) * L**2, -sign * 6 * L, (2 - phi) * L**2],
+            [-12, -sign * 6 * L, 12, -sign * 6 * L],
+            [sign * 6 * L, (2 - phi) * L**2, -sign * 6 * L, (4 + phi) * L**2],
+        ])
+
+    def translation_mass(sign: float) -> Array:
+        return s.rho * s.A * L / 420 * np.array([
+            [156, sign * 22 * L, 54, -sign * 13 * L],
+            [sign * 22 * L, 4 * L**2, sign * 13 * L, -3 * L**2],
+            [54, sign * 13 * L, 156, -sign * 22 * L],
+            [-sign * 13 * L, -3 * L**2, -sign * 22 * L, 4 * L**2],
+        ])
+
+    xy, xz = [1, 5, 7, 11], [2, 4, 8, 10]  # (v, rz) and (w, ry): rz = dv/dx, ry = -dw/dx
+    k[np.ix_(xy, xy)] += bending(s.Iz, 1.0)
+    k[np.ix_(xz, xz)] += bending(s.Iy, -1.0)
+    m[np.ix_(xy, xy)] += translation_mass(1.0)
+    m[np.ix_(xz, xz)] += translation_mass(-1.0)
+    linear = L / 6 * np.array([[2.0, 1.0], [1.0, 2.0]])
+    m[np.ix_([0, 6], [0, 6])] += s.rho * s.A * linear
+    m[np.ix_([3, 9], [3, 9])] += s.rho * (s.Iy + s.Iz) * linear
+    m[np.ix_([4, 10], [4, 10])] += s.rho * s.Iy * linear
+    m[np.ix_([5, 11], [5, 11])] += s.rho * s.Iz * linear
+    return k, m
+
+
+@dataclass(frozen=True)
+class FrameModel:
+    """Assembled frame: node coordinates and sparse stiffness and mass (6 DOFs per node).
+
+    Attributes
+    ----------
+    nodes : ndarray, shape (n_nodes, 3)
+        Node coordinates (m).
+    stiffness, mass : scipy.sparse.csr_array, shape (6 n_nodes, 6 n_nodes)
+        N/m (N m/rad) and kg (kg m^2).
+    """
+
+    nodes: Array
+    stiffness: sps.csr_array
+    mass: sps.csr_array
+
+    @property
+    def n_dof(self) -> int:
+        return int(self.stiffness.shape[0])
+
+    def dof(self, node: int, direction: str) -> int:
+        """Row of a node's DOF.
+
+        Parameters
+        ----------
+        node : int
+            Node index.
+        direction : str
+            One of ``x y z rx ry rz``.
+
+        Returns
+        -------
+        int
+        """
+        return 6 * node + _DIRECTIONS.index(direction)
+
+    def node_at(self, point: ArrayLike) -> int:
+        """Index of the node nearest ``point`` (m).
+
+        Parameters
+        ----------
+        point : array_like, shape (3,)
+            Coordinates (m).
+
+        Returns
+        -------
+        int
+        """
+        return int(np.argmin(np.linalg.norm(self.nodes - np.asarray(point, dtype=float), axis=1)))
+
+
+def frame_model(nodes: ArrayLike, elements: ArrayLike, section: BeamSection | Sequence[BeamSection], *,
+                up: ArrayLike = (0.0, 0.0, 1.0)) -> FrameModel:
+    """Assemble a 3-D frame of two-node beam elements.
+
+    Parameters
+    ----------
+    nodes : array_like, shape (n_nodes, 3)
+        Node coordinates (m).
+    elements : array_like of int, shape (n_elements, 2)
+        Node indices of each element.
+    section : BeamSection or sequence of BeamSection
+        One section for all elements or one per element.
+    up : array_like, shape (3,)
+        A vector fixing each element's local axes: local y = up x (local x), z = x × y (an element along
+        ``up`` takes global x instead).
+
+    Returns
+    -------
+    FrameModel
+
+    Raises
+    ------
+    ModelError
+        Shapes do not fit, an element has zero length or refers to a missing node.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> sec = BeamSection.rectangle(0.05, 0.05, E=210e9, nu=0.3, rho=7850.0)
+    >>> fm = frame_model(np.c_[np.linspace(0, 1, 5), np.zeros(5), np.zeros(5)], [[i, i + 1] for i in range(4)], sec)
+    >>> fm.stiffness.shape
+    (30, 30)
+    """
+    xyz = np.asarray(nodes, dtype=float)
+    conn = np.asarray(elements)
+    if xyz.ndim != 2 or xyz.shape[1] != 3 or not np.isfinite(xyz).all():
+        msg = f"nodes must be finite coordinates of shape (n_nodes, 3); got shape {xyz.shape}"
+        raise ModelError(msg)
+    if conn.ndim != 2 or conn.shape[1] != 2 or conn.dtype.kind not in "iu" or conn.min(initial=0) < 0 \
+            or conn.max(initial=0) >= xyz.shape[0]:
+        msg = f"elements must be pairs of node indices in [0, {xyz.shape[0]}); got shape {conn.shape}"
+        raise ModelError(msg)
+    sections = [section] * conn.shape[0] if isinstance(section, BeamSection) else list(section)
+    if len(sections) != conn.shape[0]:
+        msg = f"give one section or one per element ({conn.shape[0]}); got {len(sections)}"
+        raise ModelError(msg)
+    up_vec = np.asarray(up, dtype=float)
+    rows: list[NDArray[np.intp]] = []
+    k_vals: list[Array] = []
+    m_vals: list[Array] = []
+    for e, (a, b) in enumerate(conn):
+        d = xyz[b] - xyz[a]
+        length = float(np.linalg.norm(d))
+        if length <= 0:
+            msg = f"element {e} joins nodes {a} and {b} at the same place"
+            raise ModelError(msg)
+        ex = d / length
+        ref = up_vec if np.linalg.norm(np.cross(up_vec, ex)) > 1e-6 * np.linalg.norm(up_vec) else np.eye(3)[0]
+        ey = np.cross(ref, ex)
+        ey /= np.linalg.norm(ey)
+        ez = np.cross(ex, ey)
+        rot = np.vstack([ex, ey, ez])
+        t = np.kron(np.eye(4), rot)
+        k_loc, m_loc = beam_element_matrices(sections[e], length)
+        dofs = np.r_[6 * a + np.arange(6), 6 * b + np.arange(6)]
+        rows.append(dofs)
+        k_vals.append(t.T @ k_loc @ t)
+        m_vals.append(t.T @ m_loc @ t)
+    n = 6 * xyz.shape[0]
+    index = np.array(rows).reshape(-1, 12)
+    i = np.repeat(index, 12, axis=1).ravel()
+    j = np.tile(index, (1, 12)).ravel()
+
+    def assemble(values: list[Array]) -> sps.csr_array:
+        mat = sps.csr_array(sps.coo_array((np.array(values).ravel(), (i, j)), shape=(n, n)))
+        return sps.csr_array((mat + mat.T) / 2)
+
+    return FrameModel(xyz, assemble(k_vals), assemble(m_vals))

@@ -1,0 +1,471 @@
+"""Flexible bodies: reduced FE matrices (numbers, dense blocks) with named interface nodes.
+
+A flexible body brings its own generalized coordinates: the DOFs of its interface nodes (rows of the matrices in
+the order the nodes are listed, unless a node names its first ``row``) and, after them, whatever else the
+reduction kept (the fixed-interface modal coordinates of a Craig-Bampton model), labelled ``q1, q2, ...``.
+Elements, inputs, outputs and sensors attach to an interface node as to a point of a rigid body: the point is the
+node's coordinates (body frame, relative to the body's ``position``) and the motion there is the node's DOFs.
+Sensors and outputs may also sit on *interior* nodes that a recovery matrix maps from the body's coordinates.
+
+Matrices stay numbers: a flexible body adds ``s_m * M_fe`` to M and ``s_k * K_fe`` to K with scale factors
+``s_m``, ``s_k`` that may be parameters (exact derivatives: the matrices themselves). Damping is one of
+
+* ``modal``: damping ratios of the body's own free (unconstrained) elastic modes, ``C = M Phi diag(2 zeta omega)
+  Phi^T M`` (a list gives the ratios of the lowest elastic modes in order; modes beyond it take its last value;
+  rigid-body modes are undamped); with scale factors ``C = sqrt(s_k s_m) C_0`` keeps the ratios;
+* ``rayleigh``: ``C = alpha s_m M_fe + beta s_k K_fe`` (alpha 1/s, beta s);
+* ``loss``: hysteretic ``H = eta s_k K_fe`` (damping ratio eta / 2 in every elastic mode).
+
+The symbolic and exact paths (``SymbolicModel.K``, exact transfer functions, Lagrange) refuse models with
+flexible bodies with a ModelError: their matrices are numeric blocks, not expressions.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import scipy.linalg
+import scipy.sparse as sps
+import sympy as sp
+from numpy.typing import NDArray
+
+from cappe.exceptions import ModelError
+
+__all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode"]
+
+Array = NDArray[np.float64]
+_DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
+DAMPING_KINDS = ("none", "modal", "rayleigh", "loss")
+#: Largest order of a flexible body's (dense) matrices: a reduced model, not a full FE mesh.
+MAX_FLEXIBLE_DOF = 3000
+#: Relative asymmetry accepted in a matrix read from a file (written with limited digits).
+SYMMETRY_RTOL = 1e-8
+
+
+@dataclass(frozen=True)
+class InterfaceNode:
+    """A named node of a flexible body.
+
+    Attributes
+    ----------
+    name : str
+        Node name.
+    point : tuple of 3 float
+        Coordinates in the body frame, relative to the body's position (m).
+    dofs : tuple of str
+        Directions among ``x y z rx ry rz`` the node carries.
+    rows : tuple of int
+        Per direction, the row of the body's matrices (interface node) or of its recovery matrix (interior node).
+    """
+
+    name: str
+    point: tuple[float, float, float]
+    dofs: tuple[str, ...]
+    rows: tuple[int, ...]
+
+    def row(self, direction: str) -> int | None:
+        """The row of ``direction`` (None where the node does not carry it).
+
+        Parameters
+        ----------
+        direction : str
+            One of ``x y z rx ry rz``.
+
+        Returns
+        -------
+        int or None
+        """
+        return self.rows[self.dofs.index(direction)] if direction in self.dofs else None
+
+
+@dataclass(frozen=True)
+class FlexibleDamping:
+    """Damping of a flexible body (see the module text).
+
+    Attributes
+    ----------
+    kind : {"none", "modal", "rayleigh", "loss"}
+        The damping model.
+    ratios : tuple of float
+        Modal damping ratios of the lowest elastic modes (``modal``).
+    alpha, beta : sympy expression
+        Rayleigh coefficients, 1/s and s (``rayleigh``).
+    eta : sympy expression
+        Loss factor (``loss``).
+    """
+
+    kind: str = "none"
+    ratios: tuple[float, ...] = ()
+    alpha: sp.Expr = sp.Integer(0)
+    beta: sp.Expr = sp.Integer(0)
+    eta: sp.Expr = sp.Integer(0)
+
+
+@dataclass(frozen=True, eq=False)
+class FlexibleBody:
+    """A flexible body given by numeric (reduced) FE matrices and its interface nodes.
+
+    Attributes
+    ----------
+    name : str
+        Body name.
+    position : tuple of 3 sympy expressions
+        Origin of the body frame in global coordinates (m); node coordinates are relative to it.
+    mass, stiffness : ndarray, shape (n, n)
+        The body's mass (kg, kg m^2) and stiffness (N/m, N m/rad) matrices, read-only.
+    nodes : tuple of InterfaceNode
+        Interface nodes (their rows index the matrices).
+    interior : tuple of InterfaceNode
+        Interior nodes (their rows index ``recovery``).
+    recovery : ndarray, shape (n_rec, n), or None
+        Maps the body's coordinates to the interior DOFs.
+    mass_scale, stiffness_scale : sympy expression
+        Factors on the mass and stiffness matrices (parameters or numbers).
+    damping : FlexibleDamping
+        The damping model.
+    modal_damping : ndarray, shape (n, n), or None
+        ``C_0`` of modal damping at unit scales.
+    description : str
+        Free text.
+    """
+
+    name: str
+    position: tuple[sp.Expr, sp.Expr, sp.Expr]
+    mass: Array
+    stiffness: Array
+    nodes: tuple[InterfaceNode, ...]
+    interior: tuple[InterfaceNode, ...] = ()
+    recovery: Array | None = None
+    mass_scale: sp.Expr = sp.Integer(1)
+    stiffness_scale: sp.Expr = sp.Integer(1)
+    damping: FlexibleDamping = field(default_factory=FlexibleDamping)
+    modal_damping: Array | None = None
+    description: str = ""
+
+    @property
+    def n_dof(self) -> int:
+        return int(self.mass.shape[0])
+
+    @property
+    def dofs(self) -> tuple[str, ...]:
+        """Coordinate labels: ``node.dir`` for interface DOFs, ``q1, q2, ...`` for the others, in row order."""
+        labels = [""] * self.n_dof
+        for node in self.nodes:
+            for d, r in zip(node.dofs, node.rows, strict=True):
+                labels[r] = f"{node.name}.{d}"
+        k = 0
+        for i, label in enumerate(labels):
+            if not label:
+                k += 1
+                labels[i] = f"q{k}"
+        return tuple(labels)
+
+    def node(self, name: str) -> InterfaceNode | None:
+        """The interface or interior node of that name (None if there is none).
+
+        Parameters
+        ----------
+        name : str
+            Node name.
+
+        Returns
+        -------
+        InterfaceNode or None
+        """
+        return next((n for n in (*self.nodes, *self.interior) if n.name == name), None)
+
+    def node_at(self, point: Sequence[float], *, interior: bool = True) -> InterfaceNode | None:
+        """The node at ``point`` (body frame, m; within 1e-9 of the body's size), interface nodes first.
+
+        Parameters
+        ----------
+        point : sequence of 3 float
+            Body-frame coordinates (m).
+        interior : bool
+            Also look among the interior nodes.
+
+        Returns
+        -------
+        InterfaceNode or None
+        """
+        candidates = (*self.nodes, *self.interior) if interior else self.nodes
+        coords = np.array([n.point for n in candidates]).reshape(-1, 3)
+        if not coords.size:
+            return None
+        size = max(float(np.ptp(coords, axis=0).max()), 1.0)
+        dist = np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1)
+        k = int(np.argmin(dist))
+        return candidates[k] if dist[k] <= 1e-9 * size else None
+
+    def matrix_terms(self) -> list[tuple[str, sp.Expr, Array, str]]:
+        """The body's additive terms: (matrix name, coefficient, numeric block (n, n), label).
+
+        Returns
+        -------
+        list of tuple
+            ``("M", s_m, M_fe, "bed.mass")``, ``("K", s_k, K_fe, "bed.stiffness")`` and the damping terms.
+        """
+        s_m, s_k = self.mass_scale, self.stiffness_scale
+        out = [("M", s_m, self.mass, f"{self.name}.mass"), ("K", s_k, self.stiffness, f"{self.name}.stiffness")]
+        damp = self.damping
+        if damp.kind == "rayleigh":
+            if damp.alpha != 0:
+                out.append(("C", damp.alpha * s_m, self.mass, f"{self.name}.alpha"))
+            if damp.beta != 0:
+                out.append(("C", damp.beta * s_k, self.stiffness, f"{self.name}.beta"))
+        elif damp.kind == "loss" and damp.eta != 0:
+            out.append(("H", damp.eta * s_k, self.stiffness, f"{self.name}.eta"))
+        elif damp.kind == "modal" and self.modal_damping is not None:
+            out.append(("C", sp.sqrt(s_k * s_m), self.modal_damping, f"{self.name}.modal"))
+        return out
+
+
+def free_modes(mass: Array, stiffness: Array) -> tuple[Array, Array]:
+    """Undamped free modes of a body: omega^2 (ascending, negatives from round-off set to 0) and mass-normalized
+    shapes (columns)."""
+    lam, phi = scipy.linalg.eigh(stiffness, mass)
+    scale = max(abs(lam).max(), 1e-300)
+    lam = np.where(lam < 1e-10 * scale, 0.0, lam)
+    return lam, phi
+
+
+def modal_damping_matrix(mass: Array, stiffness: Array, ratios: Sequence[float]) -> Array:
+    """``M Phi diag(2 zeta omega) Phi^T M`` over the elastic free modes (rigid-body modes undamped)."""
+    lam, phi = free_modes(mass, stiffness)
+    elastic = np.flatnonzero(lam > 0)
+    zeta = np.full(elastic.size, ratios[-1] if ratios else 0.0)
+    zeta[: min(len(ratios), elastic.size)] = ratios[: elastic.size]
+    mphi = mass @ phi[:, elastic]
+    c = (mphi * (2 * zeta * np.sqrt(lam[elastic]))) @ mphi.T
+    return np.asarray(0.5 * (c + c.T))
+
+
+def _dense(matrix: Any, what: str, where: str) -> Array:
+    if sps.issparse(matrix):
+        if matrix.shape[0] > MAX_FLEXIBLE_DOF:
+            msg = (f"{what} matrix has order {matrix.shape[0]}; a flexible body takes reduced matrices up to "
+                   f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+            raise ModelError(msg)
+        matrix = matrix.toarray()
+    arr = np.asarray(matrix)
+    if arr.dtype == object or arr.dtype.kind not in "biuf":
+        msg = f"{what} matrix must hold real numbers; got {arr.dtype} ({where})"
+        raise ModelError(msg)
+    arr = np.array(arr, dtype=np.float64)
+    if arr.ndim != 2 or arr.shape[0] != arr.shape[1] or arr.shape[0] == 0:
+        msg = f"{what} matrix must be square and not empty; got shape {arr.shape} ({where})"
+        raise ModelError(msg)
+    if arr.shape[0] > MAX_FLEXIBLE_DOF:
+        msg = (f"{what} matrix has order {arr.shape[0]}; a flexible body takes reduced matrices up to "
+               f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+        raise ModelError(msg)
+    if not np.isfinite(arr).all():
+        msg = f"{what} matrix has NaN or inf entries ({where})"
+        raise ModelError(msg)
+    scale = float(abs(arr).max())
+    asym = float(abs(arr - arr.T).max())
+    if asym > SYMMETRY_RTOL * scale:
+        i, j = np.unravel_index(int(np.argmax(abs(arr - arr.T))), arr.shape)
+        msg = (f"{what} matrix must be symmetric; entries [{i}, {j}] and [{j}, {i}] differ by {asym:.3g} "
+               f"(largest entry {scale:.3g}) ({where})")
+        raise ModelError(msg)
+    return np.asarray(0.5 * (arr + arr.T))
+
+
+def checked_matrices(mass: Any, stiffness: Any, where: str) -> tuple[Array, Array]:
+    """Dense, symmetric copies of a body's mass and stiffness, checked: M positive definite, K positive
+    semi-definite, both the same order (read-only arrays).
+
+    Parameters
+    ----------
+    mass, stiffness : array_like or sparse, shape (n, n)
+        The matrices.
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    mass, stiffness : ndarray, shape (n, n)
+
+    Raises
+    ------
+    ModelError
+        A rule is broken; the message names the entry and the rule.
+    """
+    m = _dense(mass, "mass", f"{where}.mass")
+    k = _dense(stiffness, "stiffness", f"{where}.stiffness")
+    if m.shape != k.shape:
+        msg = f"mass and stiffness matrices must have the same order; got {m.shape[0]} and {k.shape[0]} ({where})"
+        raise ModelError(msg)
+    try:
+        np.linalg.cholesky(m)
+    except np.linalg.LinAlgError as exc:
+        low = float(np.linalg.eigvalsh(m).min())
+        msg = f"mass matrix must be positive definite; its smallest eigenvalue is {low:.3g} ({where}.mass)"
+        raise ModelError(msg) from exc
+    lam = scipy.linalg.eigh(k, m, eigvals_only=True)
+    scale = max(float(abs(lam).max()), 1e-300)
+    if lam.min() < -1e-8 * scale:
+        msg = (f"stiffness matrix must be positive semi-definite; it has omega^2 = {lam.min():.3g} "
+               f"(largest {scale:.3g}) ({where}.stiffness)")
+        raise ModelError(msg)
+    m.setflags(write=False)
+    k.setflags(write=False)
+    return m, k
+
+
+def parse_nodes(body: str, entries: object, n: int, where: str, *, interior: bool = False,
+                ) -> tuple[InterfaceNode, ...]:
+    """Interface (or interior) nodes from their file entries ``{name, at, dofs, row}``.
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    entries : list of mappings
+        ``name`` (identifier), ``at`` (3 numbers, m, body frame), ``dofs`` (default all six) and ``row`` (first
+        row; default: after the previous node's).
+    n : int
+        Number of rows the node rows index (the body's order, or the recovery matrix's rows).
+    where : str
+        The model entry, for messages.
+    interior : bool
+        Interior nodes (rows of the recovery matrix).
+
+    Returns
+    -------
+    tuple of InterfaceNode
+
+    Raises
+    ------
+    ModelError
+        An entry breaks a rule (duplicate name or row, row out of range, unknown direction, bad coordinates).
+    """
+    label = "interior" if interior else "nodes"
+    if not isinstance(entries, (list, tuple)) or (not entries and not interior):
+        msg = f"flexible body {body!r} {label} must be a non-empty list; got {entries!r} ({where})"
+        raise ModelError(msg)
+    nodes: list[InterfaceNode] = []
+    used: dict[int, str] = {}
+    next_row = 0
+    for i, entry in enumerate(entries):
+        here = f"{where}[{i}]"
+        if not isinstance(entry, Mapping) or "name" not in entry or "at" not in entry:
+            msg = f"a node needs 'name' and 'at' (and optionally 'dofs', 'row'); got {entry!r} ({here})"
+            raise ModelError(msg)
+        extra = sorted(set(entry) - {"name", "at", "dofs", "row"})
+        if extra:
+            msg = f"unknown node key(s) {', '.join(map(str, extra))}; allowed: at, dofs, name, row ({here})"
+            raise ModelError(msg)
+        name = entry["name"]
+        if not isinstance(name, str) or not name.isidentifier():
+            msg = f"node name must be an identifier; got {name!r} ({here}.name)"
+            raise ModelError(msg)
+        if any(node.name == name for node in nodes):
+            msg = f"duplicate node name {name!r} on flexible body {body!r} ({here}.name)"
+            raise ModelError(msg)
+        at = entry["at"]
+        if (not isinstance(at, (list, tuple)) or len(at) != 3
+                or not all(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v) for v in at)):
+            msg = f"node {name!r} 'at' must be 3 finite numbers (m, body frame); got {at!r} ({here}.at)"
+            raise ModelError(msg)
+        dofs = entry.get("dofs", list(_DIRECTIONS))
+        dof_list = list(dofs) if isinstance(dofs, (list, tuple)) else [dofs]
+        if not dof_list or any(d not in _DIRECTIONS for d in dof_list) or len(set(dof_list)) != len(dof_list):
+            msg = (f"node {name!r} dofs must be 1-6 distinct names from {', '.join(_DIRECTIONS)}; got {dofs!r} "
+                   f"({here}.dofs)")
+            raise ModelError(msg)
+        row = entry.get("row", next_row)
+        if isinstance(row, bool) or not isinstance(row, int) or row < 0 or row + len(dof_list) > n:
+            msg = (f"node {name!r} row must be an integer with row + {len(dof_list)} DOFs <= {n} "
+                   f"(the {'recovery' if interior else 'body'} matrix's rows); got {row!r} ({here}.row)")
+            raise ModelError(msg)
+        rows = tuple(range(row, row + len(dof_list)))
+        for r in rows:
+            if r in used:
+                msg = f"node {name!r} row {r} is already node {used[r]!r}'s ({here}.row)"
+                raise ModelError(msg)
+            used[r] = name
+        next_row = row + len(dof_list)
+        point = (float(at[0]), float(at[1]), float(at[2]))
+        nodes.append(InterfaceNode(name, point, tuple(dof_list), rows))
+    return tuple(nodes)
+
+
+def parse_damping(body: str, spec: object, expr: Callable[[object, str], sp.Expr],
+                  nominal: Callable[[sp.Expr], float | None], where: str) -> FlexibleDamping:
+    """The damping entry of a flexible body: ``{modal: ratio or [ratios]}``, ``{rayleigh: [alpha, beta]}`` or
+    ``{loss: eta}`` (None: undamped).
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    spec : mapping or None
+        The entry.
+    expr : callable
+        Parses an expression (value, location).
+    nominal : callable
+        The smallest value of an expression at the model's evaluation points (None if not a number).
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    FlexibleDamping
+
+    Raises
+    ------
+    ModelError
+        The entry is malformed or a value is negative.
+    """
+    if spec is None:
+        return FlexibleDamping()
+    if not isinstance(spec, Mapping) or len(spec) != 1 or next(iter(spec)) not in DAMPING_KINDS[1:]:
+        msg = (f"flexible body {body!r} damping must be one of {{modal: ratios}}, {{rayleigh: [alpha, beta]}}, "
+               f"{{loss: eta}}; got {spec!r} ({where})")
+        raise ModelError(msg)
+    kind, value = next(iter(spec.items()))
+    if kind == "modal":
+        values = value if isinstance(value, (list, tuple)) else [value]
+        ratios: list[float] = []
+        for i, v in enumerate(values):
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not (0 <= v < 1):
+                msg = f"modal damping ratios must be numbers in [0, 1); got {v!r} ({where}.modal[{i}])"
+                raise ModelError(msg)
+            ratios.append(float(v))
+        if not ratios:
+            msg = f"modal damping needs at least one ratio ({where}.modal)"
+            raise ModelError(msg)
+        return FlexibleDamping("modal", ratios=tuple(ratios))
+    if kind == "rayleigh":
+        if not isinstance(value, (list, tuple)) or len(value) != 2:
+            msg = f"rayleigh damping takes [alpha (1/s), beta (s)]; got {value!r} ({where}.rayleigh)"
+            raise ModelError(msg)
+        alpha, beta = (expr(v, f"{where}.rayleigh[{i}]") for i, v in enumerate(value))
+        for i, e in enumerate((alpha, beta)):
+            low = nominal(e)
+            if low is not None and low < 0:
+                msg = f"rayleigh coefficients must be >= 0; got {low:.6g} ({where}.rayleigh[{i}])"
+                raise ModelError(msg)
+        return FlexibleDamping("rayleigh", alpha=alpha, beta=beta)
+    eta = expr(value, f"{where}.loss")
+    low = nominal(eta)
+    if low is not None and low < 0:
+        msg = f"loss factor must be >= 0; got {low:.6g} ({where}.loss)"
+        raise ModelError(msg)
+    return FlexibleDamping("loss", eta=eta)
+
+
+def matrix_source(value: object, base: Path | None, where: str) -> Any:
+    """A matrix given in a model: an array (Python API), a sparse matrix, or a file spec read relative to
+    ``base``."""
+    if isinstance(value, (str, Mapping)):
+        from cappe.model.fe._files import read_matrix
+
+        return read_matrix(value, base, where)
+    return value

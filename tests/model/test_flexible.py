@@ -1,0 +1,335 @@
+"""Flexible bodies from FE matrices: checked against the equivalent rigid body and against the matrices, modes and
+FRFs assembled here with numpy from the same FE blocks (independent of cappe's symbolic assembly).
+
+The FE blocks come from cappe's frame generator, which tests/model/test_fe.py checks against analytic beam
+frequencies; nothing here depends on its numbers being right, only on them being a valid FE model.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+import scipy.io
+import scipy.linalg
+import scipy.sparse as sps
+
+from cappe.exceptions import ModelError
+from cappe.modal import modal_batch, modal_derivatives
+from cappe.model import NumericModel, StructureBuilder, SymbolicModel, load_model
+from cappe.model.fe import BeamSection, frame_model
+
+L_BEAM = 1.2
+N_NODES = 7
+
+
+def _beam(e_factor: float = 1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A free-free steel beam along x from 0 to L_BEAM: nodes, dense K and M (6 DOFs per node)."""
+    sec = BeamSection.rectangle(0.08, 0.12, E=210e9 * e_factor, nu=0.3, rho=7850.0)
+    nodes = np.c_[np.linspace(0, L_BEAM, N_NODES), np.zeros(N_NODES), np.zeros(N_NODES)]
+    fm = frame_model(nodes, [[i, i + 1] for i in range(N_NODES - 1)], sec)
+    return nodes, fm.stiffness.toarray(), fm.mass.toarray()
+
+
+def _node_entries(nodes: np.ndarray) -> list[dict[str, object]]:
+    return [{"name": f"n{i}", "at": [float(v) for v in p]} for i, p in enumerate(nodes)]
+
+
+def _rigid_transform(nodes: np.ndarray, centre: np.ndarray) -> np.ndarray:
+    """T (6 n_nodes, 6): node DOFs of a rigid motion (translation t, rotation theta about ``centre``)."""
+    t = np.zeros((6 * len(nodes), 6))
+    for i, p in enumerate(nodes):
+        r = p - centre
+        t[6 * i:6 * i + 3, :3] = np.eye(3)
+        # theta x r = -[r]x theta
+        t[6 * i:6 * i + 3, 3:] = -np.array([[0, -r[2], r[1]], [r[2], 0, -r[0]], [-r[1], r[0], 0]])
+        t[6 * i + 3:6 * i + 6, 3:] = np.eye(3)
+    return t
+
+
+SUPPORT = {"x": 2.0e6, "y": 3.0e6, "z": 4.0e6}
+
+
+def _supported(builder: StructureBuilder, body: str, left: object, right: object) -> None:
+    builder.element("left", bodies=["ground", body], at=[0.0, 0.0, 0.0], stiffness={**SUPPORT, "rx": 5.0e4})
+    builder.element("right", bodies=["ground", body], at=[L_BEAM, 0.0, 0.0], stiffness=SUPPORT)
+    builder.sensor("a", body=body, point=left)
+    builder.sensor("b", body=body, point=right)
+
+
+def test_very_stiff_flexible_body_has_the_modes_of_the_equivalent_rigid_body() -> None:
+    nodes, k, m = _beam()
+    flex = StructureBuilder("flex")
+    flex.parameter("s_k", 1.0e4, kind="other")  # 10^4 times steel: elastic modes far above the suspension's
+    flex.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes), stiffness_scale="s_k")
+    _supported(flex, "beam", "n0", f"n{N_NODES - 1}")
+    # the equivalent rigid body: the FE mass matrix's rigid-body projection, computed here with numpy
+    centre = np.array([L_BEAM / 2, 0.0, 0.0])
+    t = _rigid_transform(nodes, centre)
+    m_rigid = t.T @ m @ t
+    mass = m_rigid[0, 0]
+    np.testing.assert_allclose(m_rigid[:3, :3], mass * np.eye(3), rtol=1e-12)
+    np.testing.assert_allclose(m_rigid[:3, 3:], 0.0, atol=1e-9 * mass)  # the centre is the centre of mass
+    rigid = StructureBuilder("rigid")
+    rigid.body("beam", mass=float(mass), inertia=m_rigid[3:, 3:].tolist(), position=centre.tolist())
+    _supported(rigid, "beam", [-L_BEAM / 2, 0, 0], [L_BEAM / 2, 0, 0])
+    fb = modal_batch(flex.build(), n_modes=6, sensors="dofs")
+    rb = modal_batch(rigid.build(), n_modes=6, sensors="dofs")
+    # error of a stiff body's elastic compliance: (f_suspension / f_elastic)^2 ~ (20 Hz / 2 kHz)^2 = 1e-4
+    np.testing.assert_allclose(fb.frequency, rb.frequency, rtol=2e-4)
+    # the flexible shapes' rigid-body part (least squares onto T) against the rigid body's DOFs (about the centre)
+    phi_f = np.linalg.lstsq(t, fb.shapes[0], rcond=None)[0]
+    phi_r = rb.shapes[0]
+    mac = (np.sum(phi_f * phi_r, axis=0) ** 2) / (np.sum(phi_f**2, axis=0) * np.sum(phi_r**2, axis=0))
+    assert mac.min() > 0.9999
+    # and the flexible body as soft as steel is not rigid: its first elastic mode is in the range
+    soft = modal_batch(flex.build(), {"s_k": 1.0}, n_modes=8)
+    assert soft.frequency[0, 6] < 0.5 * modal_batch(flex.build(), n_modes=8).frequency[0, 6]
+
+
+def _coupled(damping: dict[str, object] | None) -> tuple[StructureBuilder, np.ndarray, np.ndarray]:
+    nodes, k, m = _beam()
+    b = StructureBuilder("coupled")
+    b.parameter("kc", 5.0e6, kind="stiffness")
+    b.parameter("cc", 300.0, kind="damping")
+    b.parameter("s_k", 1.0, kind="other", bounds=[0.5, 2.0], unknown=True)
+    b.parameter("s_m", 1.0, kind="other", bounds=[0.5, 2.0], unknown=True)
+    b.body("table", mass=25.0, dofs=["z"], position=[L_BEAM / 2, 0, 0.3])
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes), stiffness_scale="s_k",
+                    mass_scale="s_m", damping=damping)
+    _supported(b, "beam", "n0", f"n{N_NODES - 1}")
+    mid = N_NODES // 2
+    b.element("shoe", bodies=["beam", "table"], points=[f"n{mid}", [0, 0, 0]], stiffness={"z": "kc"},
+              damping={"z": "cc"})
+    b.input("F", body="table", direction="z")
+    b.input("Fb", body="beam", point=f"n{N_NODES - 1}", direction="y")
+    b.output("d", body="table", direction="z")
+    b.output("dn", body="beam", point="n1", direction="y", quantity="acceleration")
+    return b, k, m
+
+
+def _numpy_assembly(k: np.ndarray, m: np.ndarray, s_k: float, s_m: float, c_fe: np.ndarray,
+                    h_fe: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """M, C, K, H of the coupled model written out by hand: DOF 0 the table's z, then the beam's 6 N DOFs."""
+    n = 1 + k.shape[0]
+    big_m, big_k, big_c, big_h = (np.zeros((n, n)) for _ in range(4))
+    big_m[0, 0] = 25.0
+    big_m[1:, 1:] = s_m * m
+    big_k[1:, 1:] = s_k * k
+    big_c[1:, 1:] = c_fe
+    big_h[1:, 1:] = h_fe
+    for node in (0, N_NODES - 1):
+        for a, d in enumerate("xyz"):
+            i = 1 + 6 * node + a
+            big_k[i, i] += SUPPORT[d]
+    big_k[1 + 3, 1 + 3] += 5.0e4  # the left support's rx
+    zb = 1 + 6 * (N_NODES // 2) + 2
+    for mat, value in ((big_k, 5.0e6), (big_c, 300.0)):
+        mat[np.ix_([0, zb], [0, zb])] += value * np.array([[1.0, -1.0], [-1.0, 1.0]])
+    return big_m, big_c, big_k, big_h
+
+
+@pytest.mark.parametrize("kind", ["rayleigh", "loss", "modal"])
+def test_matrices_modes_and_frf_match_a_numpy_assembly(kind: str) -> None:
+    spec = {"rayleigh": {"rayleigh": [2.0, 1.0e-5]}, "loss": {"loss": 0.004}, "modal": {"modal": [0.01, 0.02]}}
+    b, k, m = _coupled(spec[kind])
+    s_k, s_m = 1.3, 0.8
+    if kind == "rayleigh":
+        c_fe, h_fe = 2.0 * s_m * m + 1.0e-5 * s_k * k, np.zeros_like(k)
+    elif kind == "loss":
+        c_fe, h_fe = np.zeros_like(k), 0.004 * s_k * k
+    else:  # modal damping of the scaled body's own free modes, with numpy: lowest elastic modes 1 % and 2 %, rest 2 %
+        lam, phi = scipy.linalg.eigh(s_k * k, s_m * m)
+        elastic = lam > 1e-6 * lam.max()
+        zeta = np.where(np.cumsum(elastic) == 1, 0.01, 0.02)[elastic]
+        mp = s_m * m @ phi[:, elastic]
+        c_fe, h_fe = (mp * 2 * zeta * np.sqrt(lam[elastic])) @ mp.T, np.zeros_like(k)
+    big_m, big_c, big_k, big_h = _numpy_assembly(k, m, s_k, s_m, c_fe, h_fe)
+    nm = NumericModel(b.build())
+    params = {"s_k": s_k, "s_m": s_m}
+    mats = nm.matrices(params)
+    scale = {"M": big_m, "C": big_c, "K": big_k, "H": big_h}
+    for name, ref in scale.items():
+        np.testing.assert_allclose(mats[name], ref, rtol=0, atol=1e-9 * abs(ref).max(initial=1.0))
+    # FRF: (K + 1j H + 1j w C - w^2 M)^-1 by numpy, input table z and beam end y; outputs table z, accel n1 y
+    freq = np.linspace(5.0, 800.0, 60)
+    frf = nm.system(params).frf(freq).H
+    bvec = np.zeros((big_m.shape[0], 2))
+    bvec[0, 0] = 1.0
+    bvec[1 + 6 * (N_NODES - 1) + 1, 1] = 1.0
+    svec = np.zeros((2, big_m.shape[0]))
+    svec[0, 0] = 1.0
+    svec[1, 1 + 6 + 1] = 1.0
+    for j, f in enumerate(freq):
+        w = 2 * np.pi * f
+        x = np.linalg.solve(big_k + 1j * big_h + 1j * w * big_c - w**2 * big_m, bvec)
+        ref = svec @ x
+        ref[1] *= -(w**2)  # the second output is an acceleration
+        np.testing.assert_allclose(frf[:, :, j], ref, rtol=1e-8, atol=1e-12 * abs(ref).max())
+    # modes: frequencies from scipy on the numpy matrices, first-order damping ratios from the numpy C and H
+    batch = modal_batch(nm, params, sensors="dofs")
+    lam, phi = scipy.linalg.eigh(big_k, big_m)
+    np.testing.assert_allclose(batch.frequency[0], np.sqrt(lam) / (2 * np.pi), rtol=1e-8)
+    w = np.sqrt(lam)
+    zeta = (np.einsum("im,ij,jm->m", phi, big_c, phi) / (2 * w) + np.einsum("im,ij,jm->m", phi, big_h, phi)
+            / (2 * w**2))
+    np.testing.assert_allclose(batch.damping[0], zeta, rtol=1e-7, atol=1e-12)
+
+
+def test_scale_factor_derivatives_match_finite_differences_and_the_matrices() -> None:
+    b, k, m = _coupled({"loss": 0.004})
+    nm = NumericModel(b.build())
+    p0 = {"s_k": 1.2, "s_m": 0.9}
+    deriv = nm.matrix_derivatives(p0, names=("M", "K", "H"), parameters=["s_k", "s_m"])
+    n = k.shape[0]
+    np.testing.assert_array_equal(deriv["K"][0][-n:, -n:], k)  # exact: the block itself
+    np.testing.assert_array_equal(deriv["M"][1][-n:, -n:], m)
+    np.testing.assert_allclose(deriv["H"][0][-n:, -n:], 0.004 * k, rtol=1e-15)
+    # modal derivatives (analytic, the modal engine's) against central differences of the modal engine
+    md = modal_derivatives(nm, p0, n_modes=10, sensors=["a", "b"])
+    names = list(nm.parameter_names)
+    for pname in ("s_k", "s_m"):
+        h = 1e-6
+        up = modal_batch(nm, {**p0, pname: p0[pname] + h}, n_modes=10)
+        down = modal_batch(nm, {**p0, pname: p0[pname] - h}, n_modes=10)
+        fd_f = (up.frequency[0] - down.frequency[0]) / (2 * h)
+        fd_z = (up.damping[0] - down.damping[0]) / (2 * h)
+        col = names.index(pname)
+        np.testing.assert_allclose(md.d_frequency[:, col], fd_f, rtol=1e-5, atol=1e-6 * abs(fd_f).max())
+        np.testing.assert_allclose(md.d_damping[:, col], fd_z, rtol=1e-4, atol=1e-6 * abs(fd_z).max())
+    # a pure stiffness scale: f ~ sqrt(s_k) for the modes of the free body... here coupled, so only the sign
+    assert (md.d_frequency[:, names.index("s_m")] < 0).all()
+
+
+def _write_model(tmp_path: Path, extra: str = "", *, mass: str = "beam_M.mtx", stiffness: str = "stiff: {file: beam.npz, key: K}") -> Path:
+    nodes, k, m = _beam()
+    scipy.io.mmwrite(str(tmp_path / "beam_M.mtx"), sps.coo_matrix(m))
+    np.savez(tmp_path / "beam.npz", K=k, M=m)
+    scipy.io.savemat(str(tmp_path / "beam.mat"), {"K": k, "M": m})
+    node_lines = "\n".join(f"      - {{name: n{i}, at: [{float(p[0])!r}, 0.0, 0.0]}}" for i, p in enumerate(nodes))
+    text = textwrap.dedent(f"""\
+        format: cappe.model/1
+        name: beam-on-mounts
+        parameters:
+          - {{name: s_k, value: 1.0, kind: other, bounds: [0.5, 2.0], unknown: true}}
+        flexible_bodies:
+          - name: beam
+            mass: {mass}
+            stiffness: STIFF
+            stiffness_scale: s_k
+            damping: {{loss: 0.002}}
+            nodes:
+        NODES
+        elements:
+          - {{name: left, bodies: [ground, beam], points: [[0, 0, 0], n0], stiffness: {{x: 2.0e6, y: 3.0e6, z: 4.0e6, rx: 5.0e4}}}}
+          - {{name: right, bodies: [ground, beam], at: [{L_BEAM!r}, 0, 0], stiffness: {{x: 2.0e6, y: 3.0e6, z: 4.0e6}}}}
+        sensors:
+          - {{name: mid, body: beam, point: n3}}
+        {extra}
+        """).replace("NODES", node_lines).replace("STIFF", stiffness.split(": ", 1)[1])
+    path = tmp_path / "model.yaml"
+    path.write_text(text)
+    return path
+
+
+def test_yaml_reads_mtx_npz_and_mat_relative_to_the_model_file(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    nodes, k, m = _beam()
+    monkeypatch.chdir(Path("/"))  # paths are relative to the model file, not the working directory
+    ref = None
+    for mass, stiffness in (("beam_M.mtx", "stiff: {file: beam.npz, key: K}"),
+                            ("{file: beam.mat, key: M}", "stiff: {file: beam.mat, key: K}")):
+        s = load_model(_write_model(tmp_path, mass=mass, stiffness=stiffness))
+        assert s.n_dof == 6 * N_NODES
+        assert s.dofs[:2] == ("beam.n0.x", "beam.n0.y")
+        mats = NumericModel(s).matrices()
+        np.testing.assert_allclose(mats["M"], m, rtol=1e-12, atol=1e-12 * abs(m).max())
+        f = modal_batch(s, n_modes=8).frequency
+        ref = f if ref is None else ref
+        np.testing.assert_allclose(f, ref, rtol=1e-9)
+
+
+def test_symbolic_and_exact_paths_refuse_flexible_models_with_a_clear_message() -> None:
+    b, _, _ = _coupled(None)
+    sym = SymbolicModel(b.build())
+    with pytest.raises(ModelError, match=r"flexible bodies \(beam\) given by numeric FE matrices: symbolic and exact"):
+        _ = sym.K
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    (lambda k, m: (k, m[:-1, :-1]), r"same order; got 41 and 42"),
+    (lambda k, m: (k + np.triu(1e-6 * abs(k).max() * np.ones_like(k), 1), m),
+     r"stiffness matrix must be symmetric; entries \[0, 1\] and \[1, 0\] differ by"),
+    (lambda k, m: (k, -m), r"mass matrix must be positive definite; its smallest eigenvalue"),
+    (lambda k, m: (k - 1e3 * m, m), r"stiffness matrix must be positive semi-definite"),
+    (lambda k, m: (k * np.nan, m), r"stiffness matrix has NaN or inf entries"),
+])
+def test_bad_matrices_are_one_line_errors_naming_the_entry(change: object, match: str) -> None:
+    nodes, k, m = _beam()
+    k2, m2 = change(k, m)  # type: ignore[operator]
+    b = StructureBuilder("bad", source="model.yaml")
+    with pytest.raises(ModelError, match=match + r".*\(model.yaml, flexible_bodies\[0\]"):
+        b.flexible_body("beam", mass=m2, stiffness=k2, nodes=_node_entries(nodes))
+
+
+def test_bad_files_and_nodes_are_one_line_errors(tmp_path: Path) -> None:
+    nodes, k, m = _beam()
+    np.save(tmp_path / "obj.npy", np.array([1], dtype=object), allow_pickle=True)
+    np.savez(tmp_path / "objs.npz", K=np.array([{"a": 1}], dtype=object))
+    (tmp_path / "junk.mtx").write_text("not a matrix market file\n")
+    np.savez(tmp_path / "two.npz", K=k, M=m)
+    b = StructureBuilder("bad", source="m.yaml", base=tmp_path)
+    cases = [
+        ("objs.npz", r"cannot read matrix file .*objs.npz: .*pickle.*\(m.yaml, flexible_bodies\[0\].mass\)"),
+        ("junk.mtx", r"cannot read matrix file .*junk.mtx.*\(m.yaml, flexible_bodies\[0\].mass\)"),
+        ("two.npz", r"holds K, M: name one with 'key' \(m.yaml, flexible_bodies\[0\].mass\)"),
+        ({"file": "two.npz", "key": "X"}, r"has no entry 'X'; it holds K, M \(m.yaml, flexible_bodies\[0\].mass.key\)"),
+        ("missing.mtx", r"cannot read matrix file .*missing.mtx: No such file"),
+        ("obj.npy", r"must end in .mtx, .mat, .npz; got '.npy'"),
+    ]
+    for i, (spec, match) in enumerate(cases):
+        with pytest.raises(ModelError, match=match):
+            b.flexible_body(f"beam{i}", mass=spec, stiffness=k, nodes=_node_entries(nodes),
+                            where="m.yaml, flexible_bodies[0]")
+    with pytest.raises(ModelError, match=r"node 'n2' row 6 is already node 'n1''s \(m.yaml, flexible_bodies\[0\].nodes\[2\].row\)"):
+        b.flexible_body("beam_r", mass=m, stiffness=k, where="m.yaml, flexible_bodies[0]",
+                        nodes=[{"name": "n0", "at": [0, 0, 0]}, {"name": "n1", "at": [1, 0, 0], "row": 6},
+                               {"name": "n2", "at": [2, 0, 0], "row": 6}])
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes))
+    with pytest.raises(ModelError, match=r"point \[0.5, 0.0, 0.0\] is not at one of flexible body 'beam''s interface nodes"):
+        b.element("e", bodies=["ground", "beam"], at=[0.5, 0, 0], stiffness={"x": 1.0})
+    with pytest.raises(ModelError, match=r"flexible body 'beam' has no node 'n99'"):
+        b.sensor("s", body="beam", point="n99")
+
+
+def test_a_node_without_the_dof_an_element_needs_is_an_error() -> None:
+    nodes, k, m = _beam()
+    entries = _node_entries(nodes)
+    b = StructureBuilder("partial")
+    # only the translations of n0 are interface DOFs named here; its rotations become q1..q3
+    entries[0] = {**entries[0], "dofs": ["x", "y", "z"]}
+    entries[1] = {**entries[1], "row": 6}
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=entries)
+    b.element("torsion", bodies=["ground", "beam"], points=[[0, 0, 0], "n0"], stiffness={"rx": 1.0e4})
+    with pytest.raises(ModelError, match=r"element 'torsion' direction 'rx' acts along rx on flexible body 'beam', at a node without that DOF"):
+        NumericModel(b.build())
+
+
+def test_interior_sensor_uses_the_recovery_matrix() -> None:
+    nodes, k, m = _beam()
+    rec = np.zeros((3, k.shape[0]))
+    rec[:, 6 * 3:6 * 3 + 3] = 0.5 * np.eye(3)
+    rec[:, 6 * 4:6 * 4 + 3] = 0.5 * np.eye(3)  # halfway between n3 and n4
+    b = StructureBuilder("rec")
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
+                    recovery={"matrix": rec, "nodes": [{"name": "h", "at": [0.5 * (nodes[3, 0] + nodes[4, 0]), 0, 0],
+                                                        "dofs": ["x", "y", "z"]}]})
+    b.element("left", bodies=["ground", "beam"], at=[0, 0, 0], stiffness={**SUPPORT, "rx": 5.0e4})
+    b.sensor("h", body="beam", point="h")
+    b.output("hz", body="beam", point="h", direction="z")
+    nm = NumericModel(b.build())
+    labels, rows = nm.sensor_matrix()
+    assert labels == ["h:x", "h:y", "h:z"]
+    np.testing.assert_array_equal(rows, rec)
+    np.testing.assert_array_equal(nm.io_matrices()[1][0], rec[2])
