@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 import urllib.error
@@ -285,3 +286,60 @@ def test_ingest_failure_after_the_file_was_recorded(ingest_dir: Path, capsys, mo
         main(["monitor", "ingest", "s.db", "c.csv"])
     assert caught.value.__notes__ == ["cappe monitor ingest stopped at c.csv: c.csv itself was recorded before the "
                                       "failure"]
+
+
+# ----------------------------------------------------------------- re-running a batch; conditions it cannot judge
+
+
+def test_a_manifest_batch_is_rerun_to_completion(monitored: Path, capsys, tmp_path: Path) -> None:
+    """The issue: re-running a manifest failed at once with "already recorded"; now recorded files are skipped."""
+    import shutil
+
+    store = tmp_path / "s.db"
+    shutil.copyfile(monitored / "store.db", store)
+    code, out, _ = run(capsys, "monitor", "ingest", store, "--manifest", monitored / "fault/scenario.json")
+    assert code == 0, out
+    assert "ingested 0 measurement(s), skipped 4 recorded already; 34 recorded" in out
+    assert out.count("already recorded as measurement") == 4
+    shutil.copyfile(monitored / "fault/m00000.uff", tmp_path / "renamed.uff")  # the same content, another name
+    code, out, _ = run(capsys, "monitor", "ingest", store, tmp_path / "renamed.uff", "--json")
+    assert code == 0
+    doc = json.loads(out)
+    assert doc["measurements"] == []
+    assert doc["skipped"][0]["why"].endswith(f"from {monitored / 'fault/m00000.uff'} (the same content)")
+
+
+def test_a_failed_batch_resumes_where_it_stopped(ingest_dir: Path, capsys) -> None:
+    code, _, _ = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "a2.csv", "b.csv", "c.csv")
+    assert code == 1
+    assert _sources(ingest_dir / "s.db") == ["a1.csv", "a2.csv"]
+    (ingest_dir / "b.csv").unlink()  # the bad file is taken out of the batch; the batch is run again
+    code, out, _ = run(capsys, "monitor", "ingest", "s.db", "a1.csv", "a2.csv", "c.csv")
+    assert code == 0
+    assert "ingested 1 measurement(s), skipped 2 recorded already" in out
+    assert _sources(ingest_dir / "s.db") == ["a1.csv", "a2.csv", "c.csv"]  # each once
+    (ingest_dir / "a1.csv").write_text((ingest_dir / "a1.csv").read_text().replace("0", "1", 1))
+    code, _, err = run(capsys, "monitor", "ingest", "s.db", "a1.csv")  # another file under a recorded name
+    assert code == 1
+    assert "a different file of this name is recorded already as measurement 1" in err
+
+
+def test_conditions_it_cannot_judge_are_said_and_recorded(monitored: Path, capsys, tmp_path: Path) -> None:
+    import shutil
+
+    store = tmp_path / "s.db"
+    shutil.copyfile(monitored / "store.db", store)
+    assert main(["monitor", "simulate", "healthy", "--store", str(store), "-n", "2", "--seed", "9", "--start",
+                 "2026-01-07T06:00:00+00:00", "-o", str(tmp_path / "d")]) == 0
+    code, out, _ = run(capsys, "monitor", "ingest", store, tmp_path / "d/m00000.uff", "--time", "2026-01-07T06:00",
+                       "--condition", "temp=22")
+    assert code == 0
+    assert re.search(r"NOT JUDGED 2026-01-07T06:00:00\+00:00 m00000.uff \(recorded as measurement 35\): the baseline "
+                     r"depends on the condition 'temperature', which the measurement does not give \(it gives temp\)",
+                     out), out
+    assert "ingested 1 measurement(s) (1 not judged)" in out
+    code, out, _ = run(capsys, "monitor", "ingest", store, tmp_path / "d/m00001.uff", "--time", "2026-01-07T06:15",
+                       "--condition", "temperature=77")
+    assert code == 0
+    assert "ALARM" not in out
+    assert "temperature 77 is implausible for this machine" in out

@@ -184,7 +184,7 @@ def test_diagnosis_text_and_dict():
     assert result.text() == "part a: -10.0 % (+- 0.9 %), conditionally tolerable, probability 100 %"
     d = result.to_dict()
     assert set(d) == {"hypothesis", "label", "probability", "change", "change_std", "severity", "candidates",
-                      "misfit", "consistent"}
+                      "misfit", "consistent", "unit", "alternatives"}
     assert d["candidates"] == result.candidates
     assert d["change"] == result.change
     assert d["misfit"] == pytest.approx(0.001**2 / 1e-4, rel=1e-9)

@@ -227,7 +227,7 @@ def ingest(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
     from cappe.io import read_measurements
-    from cappe.monitor import Monitor, MonitorConfig, read_scenario
+    from cappe.monitor import Monitor, MonitorConfig, RecordedFiles, file_digest, read_scenario
     from cappe.monitor import ingest as run_ingest
 
     conditions = number_pairs(args.condition, "--condition")
@@ -252,11 +252,13 @@ def ingest(args: argparse.Namespace) -> int:
     if not jobs:
         msg = "give measurement FILEs or --manifest"
         raise UsageError(msg)
-    results = []
-    lines = []
+    results: list[dict[str, Any]] = []
+    skipped: list[dict[str, str]] = []
+    lines: list[str] = []
     with _open(args.store) as store:
         machine = _machine(args, store)
         monitor = Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
+        known = RecordedFiles(store, machine)
         # a progress bar on a terminal only (None: tqdm's test) unless asked: never in a log or a pipe by default
         quiet = len(jobs) < 3 or args.json
         progress = tqdm(jobs, desc="ingest", unit="meas", disable=False if args.progress else (quiet or None),
@@ -264,9 +266,15 @@ def ingest(args: argparse.Namespace) -> int:
         for index, (path, when, conds) in enumerate(progress):
             before: set[int] | None = None
             try:
+                digest = file_digest(path)
+                why = known.seen(str(path), digest)
+                if why is not None:  # a re-run batch continues where it stopped
+                    skipped.append({"file": str(path), "why": why})
+                    continue
                 before = _recorded(store, machine, path, when)
                 result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
-                                    conditions=conds, monitor=monitor)
+                                    conditions=conds, monitor=monitor, digest=digest)
+                known.add(result.measurement_id, str(path), digest)
                 results.append({"file": str(path), **result.to_dict()})
             except BaseException as exc:
                 progress.close()
@@ -274,6 +282,9 @@ def ingest(args: argparse.Namespace) -> int:
                 itself = False if before is None else None if after is None else bool(after - before)
                 done = [Path(r["file"]) for r in results]
                 what = _ingest_stopped(path, done, itself, len(jobs) - index - 1)
+                if isinstance(exc, OSError) and exc.strerror:
+                    msg = f"{path}: {exc.strerror}; {what}"
+                    raise DataError(msg) from exc
                 if isinstance(exc, (DataError, ModelError, OSError)):
                     text = " ".join(str(exc).split()) or type(exc).__name__
                     msg = f"{path}: {text}; {what}"
@@ -282,17 +293,27 @@ def ingest(args: argparse.Namespace) -> int:
                 raise
             for alarm in result.alarms:
                 lines.append(f"ALARM {when.isoformat()} {path.name}: {alarm.message}")
+            if result.not_judged:
+                lines.append(f"NOT JUDGED {when.isoformat()} {path.name} (recorded as measurement "
+                             f"{result.measurement_id}): {'; '.join(result.not_judged)}")
+            lines += [f"note {when.isoformat()} {path.name}: {n}" for n in result.notes]
         counts = store.counts(machine)
         has_baseline = store.baseline(machine) is not None
-    last = results[-1]
-    lines.append(f"{machine}: ingested {len(results)} measurement(s); {counts['measurements']} recorded, "
-                 f"{counts['alarms']} alarm(s) in total")
-    lines.append("latest factors: " + ", ".join(f"{k} {v:.4f}" for k, v in last["factors"].items()))
-    if not has_baseline:
-        lines.append("no baseline yet: learn one with `cappe monitor baseline` to start detection")
-    elif last["active"]:
-        lines.append("active faults: " + ", ".join(f"{k} ({v})" for k, v in last["active"].items()))
-    emit(args, {"machine": machine, "measurements": results, "counts": counts}, "\n".join(lines))
+    lines += [f"skipped {s['file']}: {s['why']}" for s in skipped]
+    unjudged = sum(1 for r in results if r["not_judged"])
+    lines.append(f"{machine}: ingested {len(results)} measurement(s)"
+                 + (f" ({unjudged} not judged)" if unjudged else "")
+                 + (f", skipped {len(skipped)} recorded already" if skipped else "")
+                 + f"; {counts['measurements']} recorded, {counts['alarms']} alarm(s) in total")
+    if results:
+        last = results[-1]
+        lines.append("latest factors: " + ", ".join(f"{k} {v:.4f}" for k, v in last["factors"].items()))
+        if not has_baseline:
+            lines.append("no baseline yet: learn one with `cappe monitor baseline` to start detection")
+        elif last["active"]:
+            lines.append("active faults: " + ", ".join(f"{k} ({v})" for k, v in last["active"].items()))
+    emit(args, {"machine": machine, "measurements": results, "skipped": skipped, "counts": counts},
+         "\n".join(lines))
     return 0
 
 

@@ -14,7 +14,17 @@ and dashboard, and the bearing-preload studies behind it.
 """
 
 from cappe.monitor._baseline import BASELINE_FORMAT, Baseline, learn_baseline
-from cappe.monitor._chain import Alarm, Analysis, IngestResult, Monitor, ingest, learn_store_baseline, register_machine
+from cappe.monitor._chain import (
+    Alarm,
+    Analysis,
+    IngestResult,
+    Monitor,
+    RecordedFiles,
+    file_digest,
+    ingest,
+    learn_store_baseline,
+    register_machine,
+)
 from cappe.monitor._config import (
     CONFIG_FORMAT,
     SEVERITY_GRADES,
@@ -84,6 +94,7 @@ __all__ = [
     "Monitor",
     "MonitorConfig",
     "PreloadMap",
+    "RecordedFiles",
     "ScenarioMeasurement",
     "SequentialDetector",
     "SeverityThresholds",
@@ -97,6 +108,7 @@ __all__ = [
     "encode_frf",
     "ewma_arl",
     "ewma_limit",
+    "file_digest",
     "frf_features",
     "ingest",
     "learn_baseline",

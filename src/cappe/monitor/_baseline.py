@@ -9,6 +9,13 @@ from the expectation at its own conditions, so that a warm machine is not taken 
 The charts standardize the deviations by ``sqrt(std^2 + resolution^2)``: FRF-based estimates are far more
 precise (1e-5 at 1 % FRF noise) than any model of a real machine is accurate, so the ``resolution`` (default
 0.5 %) sets the smallest change the monitoring treats as real.
+
+The quadratic is known only over the conditions it was learned from. :meth:`Baseline.judge` tells whether a
+measurement's conditions let it be judged at all: a condition the baseline depends on that the measurement does
+not give, or one outside the learned range by more than :data:`LEARNED_MARGIN` of its half-range (an
+extrapolation), leaves the measurement recorded but not judged; one more than :data:`IMPLAUSIBLE` half-ranges
+away is called implausible (a unit or sensor error). :meth:`Baseline.gradient` gives the change of the expected
+log-factors per unit of each condition: the signature of a condition sensor that reads off by a constant.
 """
 
 from __future__ import annotations
@@ -24,11 +31,17 @@ from numpy.typing import ArrayLike, NDArray
 from cappe.exceptions import DataError
 from cappe.systems.frf import FRFData
 
-__all__ = ["BASELINE_FORMAT", "Baseline", "learn_baseline"]
+__all__ = ["BASELINE_FORMAT", "IMPLAUSIBLE", "LEARNED_MARGIN", "Baseline", "learn_baseline"]
 
 BASELINE_FORMAT = "cappe.monitor-baseline/1"
 
 Array = NDArray[np.float64]
+
+#: How far (in half-ranges of the healthy data, beyond the learned range) a condition may lie and still be judged.
+LEARNED_MARGIN = 0.25
+
+#: Conditions further than this many half-ranges from the learned centre are implausible for the machine.
+IMPLAUSIBLE = 5.0
 
 
 @dataclass(frozen=True)
@@ -65,6 +78,8 @@ class Baseline:
     sigma : float, optional
         Median residual of the healthy fits: how well the model describes this machine (model error included);
         later fits are judged against it.
+    left_out : tuple of str
+        Measurements of the chosen range that were left out, and why.
     """
 
     names: tuple[str, ...]
@@ -81,6 +96,7 @@ class Baseline:
     map: dict[str, Any] | None = None
     created: str = ""
     sigma: float | None = None
+    left_out: tuple[str, ...] = ()
 
     def _design(self, conditions: Mapping[str, float] | None) -> Array:
         values = []
@@ -92,6 +108,84 @@ class Baseline:
             values.append(float(conditions[name]))
         x = (np.asarray(values, dtype=float) - self.center) / self.spread
         return np.concatenate([[1.0], x, x**2])
+
+    def judge(self, conditions: Mapping[str, float] | None) -> tuple[list[str], list[str]]:
+        """Whether a measurement at these conditions can be judged against this baseline.
+
+        Parameters
+        ----------
+        conditions : mapping name -> float or None
+            The measurement's operating conditions.
+
+        Returns
+        -------
+        reasons : list of str
+            Why it cannot be judged (empty: it can): a condition missing, not finite, outside the learned range
+            by more than :data:`LEARNED_MARGIN` of its half-range, or implausible.
+        notes : list of str
+            What to know about a measurement that is judged (a condition slightly outside the learned range).
+
+        Examples
+        --------
+        >>> b = learn_baseline(np.zeros((9, 1)) + np.arange(9)[:, None] * 1e-4, names=["front"],
+        ...                    conditions=[{"temperature": 18.0 + t} for t in range(9)])
+        >>> b.judge({"temperature": 22.0})
+        ([], [])
+        >>> b.judge({"temp": 22.0})[0]
+        ["the baseline depends on the condition 'temperature', which the measurement does not give (it gives temp)"]
+        >>> b.judge({"temperature": 77.0})[0]  # doctest: +NORMALIZE_WHITESPACE
+        ['temperature 77 is implausible for this machine: 13 half-ranges from the learned range 18 to 26 (a unit
+          or sensor error?)']
+        """
+        given = dict(conditions or {})
+        reasons: list[str] = []
+        notes: list[str] = []
+        for k, name in enumerate(self.conditions):
+            if name not in given:
+                others = ", ".join(sorted(given)) or "none"
+                reasons.append(f"the baseline depends on the condition '{name}', which the measurement does not "
+                               f"give (it gives {others})")
+                continue
+            value = float(given[name])
+            lo, hi = self.center[k] - self.spread[k], self.center[k] + self.spread[k]
+            learned = f"the learned range {lo:.4g} to {hi:.4g}"
+            if not np.isfinite(value):
+                reasons.append(f"{name} is not a number ({value})")
+                continue
+            x = abs(value - self.center[k]) / self.spread[k]
+            if x > IMPLAUSIBLE:
+                reasons.append(f"{name} {value:.4g} is implausible for this machine: {x - 1:.2g} half-ranges from "
+                               f"{learned} (a unit or sensor error?)")
+            elif x > 1 + LEARNED_MARGIN:
+                reasons.append(f"{name} {value:.4g} is outside {learned} ({x - 1:.2g} half-ranges beyond it): the "
+                               f"healthy expectation there is unknown")
+            elif x > 1:
+                notes.append(f"{name} {value:.4g} is slightly outside {learned} (judged on the extrapolated "
+                             f"expectation)")
+        return reasons, notes
+
+    def gradient(self, conditions: Mapping[str, float] | None = None) -> Array:
+        """Change of the expected log-factors per unit of each condition, at these conditions.
+
+        Parameters
+        ----------
+        conditions : mapping name -> float, optional
+            The measurement's operating conditions (every one the baseline depends on).
+
+        Returns
+        -------
+        ndarray, shape (n_cond, n)
+            Row ``k``: ``d expected / d condition_k`` (per recorded unit).
+
+        Raises
+        ------
+        DataError
+            A condition the baseline depends on is missing.
+        """
+        x = self._design(conditions)[1:1 + len(self.conditions)]
+        m = len(self.conditions)
+        linear, quadratic = self.coefficients[1:1 + m], self.coefficients[1 + m:]
+        return np.asarray((linear + 2 * x[:, None] * quadratic) / self.spread[:, None], dtype=float)
 
     def expected(self, conditions: Mapping[str, float] | None = None) -> Array:
         """Expected healthy log-factors at these operating conditions.
@@ -160,6 +254,7 @@ class Baseline:
             "covariance": self.covariance.tolist(),
             "resolution": self.resolution,
             "sigma": self.sigma,
+            "left_out": list(self.left_out),
             # the view for people and the dashboard: factors at the centre of the conditions
             "mean": {n: float(v) for n, v in zip(self.names, mean, strict=True)},
             "std": {n: float(m * s) for n, m, s in zip(self.names, mean, self.std, strict=True)},
@@ -207,6 +302,7 @@ class Baseline:
                 map=data.get("map"),
                 created=str(data.get("created", "")),
                 sigma=None if data.get("sigma") is None else float(data["sigma"]),
+                left_out=tuple(str(v) for v in data.get("left_out", [])),
             )
         except (KeyError, TypeError, ValueError) as exc:
             msg = f"baseline is malformed: {type(exc).__name__} {exc}"

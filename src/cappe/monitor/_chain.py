@@ -25,10 +25,12 @@ between measurements (the detector state travels through the store). Per measure
 
 from __future__ import annotations
 
+import hashlib
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from datetime import datetime
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -36,8 +38,8 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, load_model
-from cappe.monitor._baseline import Baseline, learn_baseline
-from cappe.monitor._config import MonitorConfig, severity_rank
+from cappe.monitor._baseline import LEARNED_MARGIN, Baseline, learn_baseline
+from cappe.monitor._config import MonitorConfig, severity_rank, worst_severity
 from cappe.monitor._detection import ChartSignal, SequentialDetector
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
 from cappe.monitor._estimation import FactorEstimate, FactorEstimator
@@ -45,12 +47,16 @@ from cappe.monitor._features import frf_features, modal_features
 from cappe.systems.frf import FRFData
 from cappe.systems.timedata import TimeData
 
-__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "ingest", "learn_store_baseline", "register_machine"]
+__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles", "file_digest", "ingest",
+           "learn_store_baseline", "register_machine"]
 
 Array = NDArray[np.float64]
 
 #: Modes of the frequency-damping map kept with the baseline (thesis Fig. 5.30 shows the first ones).
 MAP_MODES = (1, 2, 3)
+
+#: Units of the operating conditions cappe knows (an offset in degC is one in K); others are shown without one.
+_CONDITION_UNITS = {"temperature": "K"}
 
 
 @dataclass(frozen=True)
@@ -144,6 +150,11 @@ class IngestResult:
         The alarms raised by this measurement.
     active : dict
         ``{fault: severity}`` of the faults active after it.
+    not_judged : tuple of str
+        Why the measurement was recorded but not judged against the baseline (empty: it was judged, or no
+        baseline exists yet).
+    notes : tuple of str
+        What to know about its judgement (a condition slightly outside the learned range).
     """
 
     measurement_id: int
@@ -151,6 +162,8 @@ class IngestResult:
     deviation: Array | None
     alarms: tuple[Alarm, ...]
     active: dict[str, str] = field(default_factory=dict)
+    not_judged: tuple[str, ...] = ()
+    notes: tuple[str, ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         names = self.analysis.estimate.names
@@ -162,7 +175,9 @@ class IngestResult:
             "features": self.analysis.feature_values(),
             "alarms": [a.to_dict() for a in self.alarms],
             "active": dict(self.active),
-            "notes": list(self.analysis.notes),
+            "notes": [*self.analysis.notes, *self.notes],
+            "judged": not self.not_judged,
+            "not_judged": list(self.not_judged),
         }
 
 
@@ -413,6 +428,44 @@ class Monitor:
             self._hypotheses = hyps
         return self._hypotheses
 
+    def sensor_hypotheses(self, baseline: Baseline, conditions: Mapping[str, float] | None) -> list[FaultHypothesis]:
+        """One hypothesis per operating condition the baseline depends on: its sensor reads off by a constant.
+
+        A reading ``a`` too high makes the expectation that of a condition ``a`` higher, so the deviation moves by
+        ``-a`` times the baseline's gradient; offsets that would put the true condition outside the learned range
+        (with :data:`LEARNED_MARGIN`) are not considered.
+
+        Parameters
+        ----------
+        baseline : Baseline
+            The healthy baseline.
+        conditions : mapping name -> float or None
+            The measurement's operating conditions (every one the baseline depends on).
+
+        Returns
+        -------
+        list of FaultHypothesis
+            Named ``<condition>_sensor``; empty for a baseline without conditions.
+        """
+        if not baseline.conditions:
+            return []
+        gradient = baseline.gradient(conditions)
+        names = self.estimator.names
+        hyps = []
+        for k, cond in enumerate(baseline.conditions):
+            direction = -gradient[k]
+            if not np.any(direction):
+                continue
+            reading = float((conditions or {})[cond])
+            margin = (1 + LEARNED_MARGIN) * float(baseline.spread[k])
+            bounds = (reading - float(baseline.center[k]) - margin, reading - float(baseline.center[k]) + margin)
+            moved = tuple(n for n, d in zip(names, direction, strict=True)
+                          if abs(d) >= 0.1 * np.max(np.abs(direction)))
+            hyps.append(FaultHypothesis(f"{cond}_sensor", f"{cond} sensor reading off", direction,
+                                        self.config.thresholds(cond), moved, unit=_CONDITION_UNITS.get(cond, ""),
+                                        bounds=bounds))
+        return hyps
+
     def detector(self, baseline: Baseline) -> SequentialDetector:
         """The charts of the configuration, standardized by the baseline's scatter.
 
@@ -475,7 +528,7 @@ class Monitor:
         log_std = np.sqrt(np.clip(np.diag(analysis.estimate.covariance), 0.0, None))
         chart_state, signals = detector.update(state["detector"], deviation, log_std)
         active: dict[str, str] = dict(state["active"])
-        hyps = {h.name: h for h in self.hypotheses()}
+        hyps = {h.name: h for h in [*self.hypotheses(), *self.sensor_hypotheses(baseline, conditions)]}
         # clear faults whose components have all come back
         for name in list(active):
             if all(detector.in_control(chart_state, c) for c in hyps[name].components):
@@ -492,16 +545,19 @@ class Monitor:
                 best[diagnosis.hypothesis] = (signal, diagnosis)
         alarms = []
         for name, (signal, diagnosis) in best.items():
-            if severity_rank(diagnosis.severity) <= severity_rank(active.get(name)):
+            # a change the data cannot attribute is graded as its worst explanation (a preload loss or a sensor)
+            grade = worst_severity([diagnosis.severity, *(a["severity"] for a in diagnosis.alternatives)])
+            assert grade is not None
+            if severity_rank(grade) <= severity_rank(active.get(name)):
                 continue
             escalated = name in active
-            active[name] = diagnosis.severity
+            active[name] = grade
             statistic = f"{detector.method}{signal.side}"
             what = "worse" if escalated else "detected"
             message = (f"{what}: {diagnosis.text()}; {statistic} chart of '{signal.name}' at "
                        f"{signal.statistic:.3g} > {signal.limit:.3g}"
                        + (f" after {signal.run} measurement(s)" if signal.run else ""))
-            alarms.append(Alarm(name, statistic, signal.statistic, diagnosis.severity, diagnosis, message))
+            alarms.append(Alarm(name, statistic, signal.statistic, grade, diagnosis, message))
         new_state = {"baseline": baseline.created, "detector": chart_state, "active": active,
                      "count": int(state["count"]) + 1}
         return new_state, deviation, alarms
@@ -548,8 +604,15 @@ def ingest(
     conditions: Mapping[str, float] | None = None,
     monitor: Monitor | None = None,
     keep_frf: bool = True,
+    digest: str | None = None,
 ) -> IngestResult:
     """Run the chain on one measurement and record everything in one transaction.
+
+    Every readable measurement is recorded. One whose operating conditions do not let it be judged against the
+    baseline (:meth:`Baseline.judge`: a condition missing or under another name, not a number, outside the
+    learned range, implausible) is recorded with its estimates but not judged: the charts skip it, and
+    ``IngestResult.not_judged`` and the record's meta say why. Conditions that are not finite numbers are kept
+    in the meta, not with the conditions.
 
     The heavy steps (features, estimation) run before the transaction; detection, diagnosis and the record run
     inside it, under the store's per-machine lock, so concurrent ingests continue each other's charts. When
@@ -574,6 +637,8 @@ def ingest(
         The machine's monitor (built from the stored config when not given).
     keep_frf : bool
         Store the FRF in the band with the measurement.
+    digest : str, optional
+        Content hash of the measurement file (kept in the meta as ``sha256``: how a re-run recognizes it).
 
     Returns
     -------
@@ -593,15 +658,24 @@ def ingest(
     alarms: list[Alarm] = []
     fit_meta = {"success": analysis.estimate.success, "sigma": analysis.estimate.sigma,
                 "iterations": analysis.estimate.iterations}
+    given = {str(k): float(v) for k, v in (conditions or {}).items()}
+    finite = {k: v for k, v in given.items() if np.isfinite(v)}
+    not_judged, judge_notes = baseline.judge(given) if baseline is not None else ([], [])
+    meta: dict[str, Any] = {"notes": [*analysis.notes, *judge_notes], "fit": fit_meta}
+    if not_judged:
+        meta["not_judged"] = not_judged
+    if len(finite) < len(given):
+        meta["conditions_not_finite"] = {k: str(v) for k, v in given.items() if k not in finite}
+    if digest is not None:
+        meta["sha256"] = digest
     with store.transaction(machine) as tx:
         state = tx.state()
-        mid = tx.add_measurement(timestamp=timestamp, source=source, kind=kind, conditions=dict(conditions or {}),
-                                 frf=mon._band(frf) if keep_frf else None,
-                                 meta={"notes": list(analysis.notes), "fit": fit_meta})
+        mid = tx.add_measurement(timestamp=timestamp, source=source, kind=kind, conditions=finite,
+                                 frf=mon._band(frf) if keep_frf else None, meta=meta)
         tx.add_features(mid, analysis.features())
         tx.add_estimates(mid, path="fast", values=dict(zip(names, analysis.estimate.factor.tolist(), strict=True)),
                          std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
-        if baseline is not None:
+        if baseline is not None and not not_judged:
             state, deviation, alarms = mon.step(state, analysis, conditions, baseline)
             # the change from the healthy expectation at these conditions, for people and the dashboard
             tx.add_estimates(mid, path="deviation", values=dict(zip(names, np.expm1(deviation).tolist(), strict=True)),
@@ -612,13 +686,105 @@ def ingest(
             tx.set_state(state)
         count = int((state or {}).get("count", 0))
     every = mon.config.slow_every
-    if alarms or (every and baseline is not None and count % every == 0):
+    if alarms or (every and baseline is not None and not not_judged and count % every == 0):
         slow = mon.slow_path(frf, analysis.estimate)
         with store.transaction(machine) as tx:
             tx.add_estimates(mid, path="slow", values=dict(zip(slow.names, slow.factor.tolist(), strict=True)),
                              std=dict(zip(slow.names, slow.std.tolist(), strict=True)))
         analysis = replace(analysis, slow=slow)
-    return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})))
+    return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})),
+                        not_judged=tuple(not_judged), notes=tuple(judge_notes))
+
+
+def file_digest(path: str | Path) -> str:
+    """SHA-256 of a file's bytes (how a re-run ingest recognizes a file it recorded, whatever its name).
+
+    Parameters
+    ----------
+    path : str or Path
+        The file.
+
+    Returns
+    -------
+    str
+        64 hex digits.
+
+    Raises
+    ------
+    OSError
+        The file cannot be read.
+    """
+    digest = hashlib.sha256()
+    with open(path, "rb") as handle:
+        for block in iter(lambda: handle.read(1 << 20), b""):
+            digest.update(block)
+    return digest.hexdigest()
+
+
+class RecordedFiles:
+    """The files a machine's measurements were recorded from: by source name and by content hash.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    machine : str
+        A registered machine.
+    """
+
+    def __init__(self, store: Any, machine: str) -> None:
+        self._by_source: dict[str, tuple[int, str | None]] = {}
+        self._by_digest: dict[str, tuple[int, str]] = {}
+        for r in store.measurements(machine):
+            self.add(r.id, r.source, r.meta.get("sha256") if isinstance(r.meta, Mapping) else None)
+
+    def add(self, measurement_id: int, source: str, digest: str | None) -> None:
+        """Note a recorded measurement.
+
+        Parameters
+        ----------
+        measurement_id : int
+            Its id in the store.
+        source : str
+            The file it was recorded from.
+        digest : str or None
+            The file's content hash (None: not known).
+        """
+        self._by_source[source] = (measurement_id, digest)
+        if digest is not None:
+            self._by_digest.setdefault(digest, (measurement_id, source))
+
+    def seen(self, source: str, digest: str) -> str | None:
+        """Why a file need not be ingested again (None: it is new).
+
+        Parameters
+        ----------
+        source : str
+            The file's name as it would be recorded.
+        digest : str
+            Its content hash (:func:`file_digest`).
+
+        Returns
+        -------
+        str or None
+
+        Raises
+        ------
+        DataError
+            Another file of the same name is recorded already (a source is recorded once per machine).
+        """
+        if digest in self._by_digest:
+            ident, first = self._by_digest[digest]
+            return (f"already recorded as measurement {ident}"
+                    + ("" if first == source else f" from {first} (the same content)"))
+        if source in self._by_source:
+            ident, known = self._by_source[source]
+            if known is None:
+                return f"already recorded as measurement {ident} (recorded before content hashes were kept)"
+            msg = (f"a different file of this name is recorded already as measurement {ident} (its content hash "
+                   f"differs); rename the new file to record it")
+            raise DataError(msg)
+        return None
 
 
 def learn_store_baseline(
@@ -662,6 +828,13 @@ def learn_store_baseline(
     records = store.measurements(machine, since=since, until=until)
     if first is not None:
         records = records[:first]
+    # a measurement without a condition most others give would drop that condition from the regression: it is
+    # left out (and said so), not the condition
+    usual = {k for k in {k for r in records for k in r.conditions}
+             if 2 * sum(k in r.conditions for r in records) > len(records)}
+    left_out = [f"measurement {r.id} ({r.source}) lacks the condition(s) {sorted(usual - set(r.conditions))}"
+                for r in records if not usual <= set(r.conditions)]
+    records = [r for r in records if usual <= set(r.conditions)]
     if not records:
         msg = f"machine '{machine}' has no recorded measurements in the chosen range to learn a baseline from"
         raise DataError(msg)
@@ -682,6 +855,7 @@ def learn_store_baseline(
     baseline = mon._learn(log_factors, features=per_measurement, conditions=[r.conditions for r in records],
                           frfs=frfs if len(frfs) == len(ids) else None, resolution=resolution,
                           measurement_ids=ids, sigma=_median_fit_sigma(records))
+    baseline = replace(baseline, left_out=tuple(left_out))
     store.set_baseline(machine, baseline.to_dict())
     with store.transaction(machine) as tx:
         tx.set_state({"baseline": baseline.created, "detector": None, "active": {}, "count": 0})

@@ -9,6 +9,13 @@ the generalized-least-squares fit ``a_j = d'S^-1 D / d'S^-1 d`` and its misfit `
 probability of hypothesis ``j`` is ``exp(-chi2_j / 2)`` normalized over the hypotheses. When even the best
 hypothesis leaves a misfit beyond the 99.9 % quantile of chi-square with ``n - 1`` degrees of freedom, the
 diagnosis says so: several faults at once, or one the hypotheses do not describe.
+
+A hypothesis may also be a condition sensor that reads off by a constant (``unit`` set): its direction is the
+baseline's change of the expected log-factors per unit of the condition, its magnitude the offset in that unit
+(not a relative change), bounded by ``bounds`` (an offset that would put the true condition outside what the
+baseline learned is not a sensor offset it can explain: the fit is held at the bound). Every hypothesis that
+keeps at least :data:`ALTERNATIVE` of the probability is named in the text, so that a change the data cannot
+attribute (a preload loss or a temperature sensor reading high) reads as such.
 """
 
 from __future__ import annotations
@@ -24,9 +31,16 @@ from scipy.stats import chi2 as chi2_dist
 from cappe.exceptions import DataError
 from cappe.monitor._config import SeverityThresholds
 
-__all__ = ["Diagnosis", "FaultHypothesis", "diagnose"]
+__all__ = ["ALTERNATIVE", "Diagnosis", "FaultHypothesis", "diagnose"]
 
 Array = NDArray[np.float64]
+
+#: Posterior probability from which a hypothesis other than the best is named as an alternative.
+ALTERNATIVE = 0.05
+
+#: The grade of a condition-sensor hypothesis: the machine may run, but its monitoring is blind until the sensor
+#: is checked.
+SENSOR_GRADE = "conditionally tolerable"
 
 
 @dataclass(frozen=True)
@@ -45,6 +59,12 @@ class FaultHypothesis:
         Grades of the hypothesis's relative change.
     components : tuple of str
         The components the hypothesis moves noticeably (for clearing a latched alarm).
+    unit : str or None
+        None for a component or model parameter (magnitude: a relative change); the unit of a condition for a
+        condition sensor's offset (magnitude: the offset, in that unit; ``""`` for a unit not known).
+    bounds : (float, float) or None
+        The magnitudes the hypothesis can take (a condition sensor: offsets that keep the true condition inside
+        the learned range); None: any.
     """
 
     name: str
@@ -52,6 +72,8 @@ class FaultHypothesis:
     direction: Array
     thresholds: SeverityThresholds = field(default_factory=SeverityThresholds)
     components: tuple[str, ...] = ()
+    unit: str | None = None
+    bounds: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -76,6 +98,11 @@ class Diagnosis:
         ``chi2`` of the best hypothesis.
     consistent : bool
         False when the best hypothesis does not explain the change (see the module notes).
+    unit : str or None
+        The best hypothesis's unit (None: ``change`` is relative; else an offset in this unit).
+    alternatives : tuple of dict
+        The other hypotheses with at least :data:`ALTERNATIVE` of the probability, most probable first:
+        ``hypothesis, label, probability, change, change_std, severity, unit``.
     """
 
     hypothesis: str
@@ -87,6 +114,8 @@ class Diagnosis:
     candidates: dict[str, float]
     misfit: float
     consistent: bool
+    unit: str | None = None
+    alternatives: tuple[dict[str, Any], ...] = ()
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -99,13 +128,28 @@ class Diagnosis:
             "candidates": dict(self.candidates),
             "misfit": self.misfit,
             "consistent": self.consistent,
+            "unit": self.unit,
+            "alternatives": [dict(a) for a in self.alternatives],
         }
 
     def text(self) -> str:
         """One line for people."""
         note = "" if self.consistent else " (no single fault explains the change well)"
-        return (f"{self.label}: {100 * self.change:+.1f} % (+- {100 * self.change_std:.1f} %), "
-                f"{self.severity}, probability {100 * self.probability:.0f} %{note}")
+        first = _words(self.label, self.change, self.change_std, self.severity, self.unit, self.probability)
+        others = [_words(a["label"], a["change"], a["change_std"], a["severity"], a["unit"], a["probability"])
+                  for a in self.alternatives]
+        if not others:
+            return first + note
+        return (first + "; or " + "; or ".join(others) + note
+                + "; the data cannot tell these apart")
+
+
+def _words(label: str, change: float, std: float, severity: str, unit: str | None, probability: float) -> str:
+    if unit is None:
+        size = f"{100 * change:+.1f} % (+- {100 * std:.1f} %), {severity}"
+    else:
+        size = f"{change:+.2g}{' ' + unit if unit else ''} (+- {std:.1g}{' ' + unit if unit else ''})"
+    return f"{label}: {size}, probability {100 * probability:.0f} %"
 
 
 def diagnose(change: ArrayLike, covariance: Array, hypotheses: Sequence[FaultHypothesis]) -> Diagnosis:
@@ -150,6 +194,11 @@ def diagnose(change: ArrayLike, covariance: Array, hypotheses: Sequence[FaultHyp
             fits.append((total, 0.0, np.inf))
             continue
         a = float(d @ info @ dvec) / weight
+        if hyp.bounds is not None:  # the misfit at the nearest magnitude the hypothesis can take
+            a = float(np.clip(a, *hyp.bounds))
+            left = dvec - a * d
+            fits.append((max(float(left @ info @ left), 0.0), a, 1.0 / np.sqrt(weight)))
+            continue
         fits.append((max(total - a * a * weight, 0.0), a, 1.0 / np.sqrt(weight)))
     misfits = np.array([f[0] for f in fits])
     log_post = -0.5 * (misfits - misfits.min())
@@ -157,16 +206,30 @@ def diagnose(change: ArrayLike, covariance: Array, hypotheses: Sequence[FaultHyp
     best = int(np.argmin(misfits))
     hyp = hypotheses[best]
     misfit, a, a_std = fits[best]
-    rel = float(np.expm1(a))
     limit = float(chi2_dist.ppf(0.999, max(n - 1, 1)))
+    sizes = [_size(h, f[1], f[2]) for h, f in zip(hypotheses, fits, strict=True)]
+    alternatives = tuple(
+        {"hypothesis": hypotheses[j].name, "label": hypotheses[j].label, "probability": float(post[j]),
+         "change": sizes[j][0], "change_std": sizes[j][1], "severity": sizes[j][2], "unit": hypotheses[j].unit}
+        for j in np.argsort(-post) if j != best and post[j] >= ALTERNATIVE)
     return Diagnosis(
         hypothesis=hyp.name,
         label=hyp.label,
         probability=float(post[best]),
-        change=rel,
-        change_std=float(np.exp(a) * a_std),
-        severity=hyp.thresholds.grade(rel),
+        change=sizes[best][0],
+        change_std=sizes[best][1],
+        severity=sizes[best][2],
         candidates={h.name: float(p) for h, p in zip(hypotheses, post, strict=True)},
         misfit=float(misfit),
         consistent=bool(misfit <= limit),
+        unit=hyp.unit,
+        alternatives=alternatives,
     )
+
+
+def _size(hyp: FaultHypothesis, a: float, a_std: float) -> tuple[float, float, str]:
+    """Magnitude, its standard uncertainty and grade of a hypothesis fitted at log-magnitude (or offset) ``a``."""
+    if hyp.unit is not None:
+        return float(a), float(a_std), SENSOR_GRADE
+    rel = float(np.expm1(a))
+    return rel, float(np.exp(a) * a_std), hyp.thresholds.grade(rel)
