@@ -38,6 +38,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
     p.add_argument("--plot-landscape", metavar="A,B:FILE.png",
                    help="the method's cost over unknowns A and B around the optimum (least-squares methods)")
+    p.add_argument("--plot-residuals", metavar="FILE.png",
+                   help="residual analysis as MATLAB's resid: autocorrelation of the output errors and their "
+                        "cross-correlation with the inputs, with 99 %% bounds (one-step, time data)")
     p.add_argument("--plot-response", metavar="FILE.png",
                    help="measured vs model response before (start) and after estimation (time data or FRFs)")
     p.set_defaults(func=run)
@@ -132,9 +135,21 @@ def run(args: argparse.Namespace) -> int:
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = estimator.fit(data).estimate_
+    shown = set(result.diagnostics.get("warnings", []))  # these print in the text output (and stay in the JSON)
     for w in caught:
-        print(f"cappe: warning: {w.message}", file=sys.stderr)
+        if not any(line in str(w.message) for line in shown):
+            print(f"cappe: warning: {w.message}", file=sys.stderr)
     doc = result.to_dict()
+    if args.plot_residuals:
+        analysis = result.diagnostics.get("residual_analysis")
+        if not analysis or "outputs" not in analysis:
+            reason = "an exact fit has none" if analysis else f"method {args.method!r} on {have} data has none"
+            msg = f"--plot-residuals: no residual analysis to plot ({reason})"
+            raise UsageError(msg)
+        from cappe.identify import ResidualAnalysis
+
+        ResidualAnalysis.from_dict(analysis).plot(args.plot_residuals, title=f"{result.method}: residual analysis")
+        doc["diagnostics"]["plot_residuals"] = args.plot_residuals
     if args.plot:
         _plot(result, args.plot)
         doc["diagnostics"]["plot"] = args.plot
@@ -199,9 +214,17 @@ def _plot_response(ctx: ModelContext, estimator: Any, result: Any, data: Any, pa
 
 
 def _text(result: Any, method: str) -> str:
-    lines = [f"{method}: {'converged' if result.success else 'NOT converged'}"
-             f"{' - ' + result.message if result.message else ''}; cost {result.cost:.4g}",
-             "   parameter          value        std (%)           95 % interval   identifiable"]
+    diagnostics = result.diagnostics
+    if result.success:
+        state = "converged"
+    elif diagnostics.get("fit_test") == "failed":
+        state = "FAILED (the fit does not explain the data)"
+    else:
+        state = "NOT converged"
+    lines = [f"{method}: {state}{' - ' + result.message if result.message else ''}; cost {result.cost:.4g}"]
+    if "intersample" in diagnostics:
+        lines.append(f"inputs between samples: {diagnostics['intersample']}")
+    lines.append("   parameter          value        std (%)           95 % interval   identifiable")
     for k, name in enumerate(result.names):
         v, s = result.values[k], result.std[k]
         rel = f"{100 * s / abs(v):10.3g}" if np.isfinite(s) and v != 0 else "         -"
@@ -211,4 +234,13 @@ def _text(result: Any, method: str) -> str:
         lines.append(f"  {name:>10s}  {v:13.6g}  {rel}     {interval:>24s}   {flag}")
     if result.combinations:
         lines.append("undetermined combinations (relative changes): " + "; ".join(result.combinations))
+    analysis = diagnostics.get("residual_analysis")
+    if isinstance(analysis, dict) and "outputs" in analysis:
+        white = analysis.get("white", {})
+        lines.append(
+            f"residual tests ({analysis['samples']} samples, level {analysis['level']:g}): independent of the inputs "
+            f"{'yes' if analysis.get('independent') else 'NO'}; white "
+            + ", ".join(f"{o} {'yes' if ok else 'NO'}" for o, ok in white.items())
+        )
+    lines += [f"WARNING: {line}" for line in diagnostics.get("warnings", [])]
     return "\n".join(lines)

@@ -25,7 +25,11 @@ from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "least_squares_fit"]
+__all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "least_squares_fit", "with_residual_tests"]
+
+#: Residuals below this RMS (relative to the data's, which the estimators scale to 1) are an exact fit: rounding,
+#: not noise, so there is nothing for a residual test to judge.
+_EXACT_FIT_RMS = 1e-8
 
 Array = NDArray[np.float64]
 Residuals = Callable[[Array], Array]
@@ -158,9 +162,8 @@ class Estimator(Settings, ABC):
         self._cost = fitted.cost
         result = fitted.estimate
         if not result.success:
-            warnings.warn(
-                f"{self.method} estimation did not converge: {result.message}", ConvergenceWarning, stacklevel=2
-            )
+            verb = "failed its residual tests" if result.diagnostics.get("fit_test") == "failed" else "did not converge"
+            warnings.warn(f"{self.method} estimation {verb}: {result.message}", ConvergenceWarning, stacklevel=2)
         self._estimate = result
         return self
 
@@ -425,3 +428,55 @@ def least_squares_fit(
         method, unc, cost=float(2 * best.cost), success=success, message=message, diagnostics=diag
     )
     return Fitted(estimate, CostFunction(space, residuals, p))
+
+
+def with_residual_tests(
+    estimate: ParameterEstimate,
+    residuals: Sequence[Array],
+    inputs: Sequence[Array],
+    output_names: Sequence[str],
+    input_names: Sequence[str],
+) -> ParameterEstimate:
+    """The estimate with MATLAB-``resid`` tests of its time-domain output errors (:func:`residual_analysis`).
+
+    ``diagnostics["residual_analysis"]`` holds the correlations, bounds and p-values, ``diagnostics["warnings"]``
+    one line per failed test. Residuals that correlate with an input mean the model does not explain the data:
+    ``success`` becomes False (``diagnostics["fit_test"] = "failed"``) and the message says why. Coloured but
+    input-independent residuals only warn. An exact fit (residual RMS below 1e-8 of the data's) is not tested.
+
+    Parameters
+    ----------
+    estimate : ParameterEstimate
+        The fitted estimate.
+    residuals : sequence of ndarray, shape (n_samples, n_out)
+        Output errors per record (scaled to the outputs' RMS).
+    inputs : sequence of ndarray, shape (n_samples, n_in)
+        Inputs per record.
+    output_names, input_names : sequence of str
+        Channel names.
+
+    Returns
+    -------
+    ParameterEstimate
+    """
+    from cappe.identify._residual_analysis import residual_analysis
+
+    diagnostics = dict(estimate.diagnostics)
+    warns = list(diagnostics.get("warnings", []))
+    rms = float(np.sqrt(np.mean(np.concatenate([np.ravel(r) for r in residuals]) ** 2)))
+    if not rms > _EXACT_FIT_RMS:
+        diagnostics["residual_analysis"] = {"exact_fit": True, "rms": rms}
+        return replace(estimate, diagnostics=diagnostics)
+    analysis = residual_analysis(residuals=list(residuals), inputs=list(inputs), output_names=output_names,
+                                 input_names=input_names)
+    diagnostics["residual_analysis"] = analysis.to_dict()
+    warns += analysis.warnings()
+    diagnostics["warnings"] = warns
+    if analysis.passed:
+        diagnostics.setdefault("fit_test", "passed")
+        return replace(estimate, diagnostics=diagnostics)
+    diagnostics["fit_test"] = "failed"
+    message = "the residuals correlate with the inputs: the model does not explain the data"
+    if estimate.message:
+        message = f"{message} ({estimate.message})"
+    return replace(estimate, success=False, message=message, diagnostics=diagnostics)

@@ -58,7 +58,7 @@ from scipy.optimize import least_squares
 
 from cappe._arguments import positive_number
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, Fitted, least_squares_fit
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit, with_residual_tests
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
@@ -587,7 +587,15 @@ class OneStepEstimator(Estimator):
             nuisance["delay"] = {"value": delay * dt, "samples": delay, "std": std}
         if self.offsets:
             nuisance["offsets"] = self._offsets(sim, records, params, delay, outputs, len(theta), result.cost)
-        return fitted.with_estimate(_physical(result, space.n, nuisance))
+        estimate = _physical(result, space.n, nuisance)
+        if np.all(np.isfinite(theta)):
+            flat = exact_residuals(theta)
+            parts, at = [], 0
+            for rec in records:
+                parts.append(flat[at: at + rec.y.size].reshape(rec.y.shape))
+                at += rec.y.size
+            estimate = with_residual_tests(estimate, parts, [rec.u for rec in records], outputs, inputs)
+        return fitted.with_estimate(estimate)
 
     def _project(self, r: Array, modes: _Modes, sim: _TimeModel, *, free: bool) -> Array:
         """Output error (N, n_out) with the offsets (and the free response) projected out, flattened."""
@@ -780,6 +788,7 @@ class _FRFProblem:
     residuals: Callable[[Array], Array]
     jacobian: Callable[[Array], Array]
     info: dict[str, Any]
+    pairs: tuple[tuple[str, int], ...] = ()  # ("output/input", lines used) in the residuals' order
 
 
 class OneStepFRFEstimator(Estimator):
@@ -971,7 +980,10 @@ class OneStepFRFEstimator(Estimator):
         info: dict[str, Any] = {"inputs": inputs, "outputs": outputs, "lines": int(freq.size),
                                 "band": [float(freq.min()), float(freq.max())], "residual": self.residual,
                                 "weighting": self.weighting if data.coherence is not None else "uniform"}
-        return _FRFProblem(full, shift, residuals, jacobian, info)
+        counts = mask.sum(axis=2)
+        pairs = tuple((f"{o}/{i}", int(counts[a, b])) for a, o in enumerate(outputs) for b, i in enumerate(inputs)
+                      if counts[a, b])
+        return _FRFProblem(full, shift, residuals, jacobian, info, pairs)
 
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
              rng: np.random.Generator) -> Fitted:
@@ -984,4 +996,38 @@ class OneStepFRFEstimator(Estimator):
         nuisance = dict(problem.info)
         if self.delay:
             nuisance["delay"] = {"value": float(result.values[space.n] - shift), "std": float(result.std[space.n])}
-        return fitted.with_estimate(_physical(result, space.n, nuisance))
+        estimate = _physical(result, space.n, nuisance)
+        if fitted.cost is not None:
+            estimate = self._runs_test(estimate, problem, problem.residuals(fitted.cost.centre))
+        return fitted.with_estimate(estimate)
+
+    @staticmethod
+    def _runs_test(estimate: ParameterEstimate, problem: _FRFProblem, r: Array) -> ParameterEstimate:
+        """The estimate with a runs test of its residuals along frequency (:func:`cappe.identify.runs_test`): long
+        runs of one sign are a misfit far above the noise, so ``success`` becomes False and the message says so."""
+        from cappe.identify._residual_analysis import runs_test
+
+        diagnostics = dict(estimate.diagnostics)
+        half = r.size // 2
+        if not np.sqrt(np.mean(r**2)) > 1e-8:  # an exact fit: rounding, nothing to test
+            diagnostics["residual_analysis"] = {"exact_fit": True}
+            return replace(estimate, diagnostics=diagnostics)
+        series, names, at = [], [], 0
+        for label, count in problem.pairs:
+            for part, offset in (("real", 0), ("imag", half)):
+                series.append(r[offset + at: offset + at + count])
+                names.append(f"{label} {'log-magnitude' if problem.info['residual'] == 'log' else 'real'}"
+                             if part == "real" else
+                             f"{label} {'phase' if problem.info['residual'] == 'log' else 'imag'}")
+            at += count
+        test = runs_test(residuals=series, names=names)
+        diagnostics["residual_analysis"] = test.to_dict()
+        diagnostics["warnings"] = [*diagnostics.get("warnings", []), *test.warnings()]
+        if test.passed:
+            diagnostics.setdefault("fit_test", "passed")
+            return replace(estimate, diagnostics=diagnostics)
+        diagnostics["fit_test"] = "failed"
+        message = "the residuals are a systematic misfit, not noise: the model does not explain the FRFs"
+        if estimate.message:
+            message = f"{message} ({estimate.message})"
+        return replace(estimate, success=False, message=message, diagnostics=diagnostics)

@@ -55,6 +55,12 @@ from cappe.identify._rational import (
     RationalFit,
     fit_rational,
 )
+from cappe.identify._residual_analysis import (
+    ResidualAnalysis,
+    RunsTest,
+    residual_analysis,
+    runs_test,
+)
 from cappe.identify._rigid_body import (
     NINE_ACCELEROMETER_LABELS,
     RIGID_BODY_DOFS,
@@ -84,11 +90,15 @@ from cappe.identify._signals import (
 )
 
 __all__ = [
+    "residual_analysis",
+    "runs_test",
     "ARMAX",
     "ARX",
     "BLACK_BOX_STRUCTURES",
     "NINE_ACCELEROMETER_LABELS",
     "OE",
+    "ResidualAnalysis",
+    "RunsTest",
     "RIGID_BODY_DOFS",
     "AccelerometerLayout",
     "BlackBoxFit",

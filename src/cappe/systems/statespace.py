@@ -40,8 +40,9 @@ CArray = NDArray[np.complex128]
 INTERSAMPLE = ("zoh", "foh", "bl")
 #: Zero padding of a band-limited simulation: until the slowest mode has decayed to exp(-28) ~ 7e-13.
 _BL_DECAYS = 28.0
-#: Longest padded record of a band-limited simulation (samples); beyond it the wrap-around is not negligible.
-_BL_MAX_SAMPLES = 1 << 23
+#: Longest zero padding of a band-limited simulation: 4 record lengths or 2^18 samples, whichever is longer (a mode
+#: that decays more slowly wraps around with exp(-decay_rate * padding) of its amplitude).
+_BL_MAX_PAD = 1 << 18
 
 
 def check_intersample(intersample: str) -> str:
@@ -174,7 +175,8 @@ def band_limited_response(
     """Response to a band-limited input, computed in the frequency domain over the zero-padded record.
 
     ``Y(omega) = H(omega) U(omega)`` on the DFT grid of the record padded with zeros for ``28 / decay_rate``
-    seconds (the slowest mode decays by exp(-28) before the response wraps around), at most 2^23 samples in all.
+    seconds (the slowest mode decays by exp(-28) before the response wraps around), at least one record length and
+    at most four or 2^18 samples, whichever is longer.
     At the Nyquist line (even lengths) the real part of ``H`` is used: a band-limited real signal has no
     quadrature component there.
 
@@ -214,7 +216,7 @@ def band_limited_response(
         )
         raise DataError(msg)
     pad = int(np.ceil(_BL_DECAYS / (decay_rate * dt)))
-    total = sfft.next_fast_len(min(n + max(pad, n), max(_BL_MAX_SAMPLES, 2 * n)), real=True)
+    total = sfft.next_fast_len(n + min(max(pad, n), max(_BL_MAX_PAD, 4 * n)), real=True)
     spec = sfft.rfft(uu, n=total, axis=0)  # (n_f, n_in)
     omega = 2 * np.pi * sfft.rfftfreq(total, dt)
     h = np.asarray(transfer(omega))
