@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import inspect
 import sys
 import warnings
 
@@ -46,13 +47,24 @@ def run(args: argparse.Namespace) -> int:
         msg = f"--noise needs levels >= 0 and --seeds >= 1; got {args.noise!r} and {args.seeds}"
         raise UsageError(msg)
     start = read_parameters(args.start) if args.start else None
+    from cappe.estimate._registry import estimator_class
+
+    if args.position and "position" not in inspect.signature(estimator_class(args.method).__init__).parameters:
+        msg = (
+            f"--position does not apply to method {args.method!r}: its reference data carry the axis position of "
+            "each set"
+        )
+        raise UsageError(msg)
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         result = simulation_study(model=ctx.numeric, method=args.method, truth=truth, unknowns=names(args.unknowns),
                                   noise_levels=levels, seeds=range(args.seeds), start=start,
-                                  settings=settings(args.setting), fs=args.fs, duration=args.duration)
+                                  settings=settings(args.setting), fs=args.fs, duration=args.duration,
+                                  position=ctx.position if args.position else None)
     for message in dict.fromkeys(str(w.message) for w in caught):
         print(f"cappe: warning: {message}", file=sys.stderr)
-    emit(args, result.to_dict(), f"{ctx.structure.name}, {args.method}: {args.seeds} runs per noise level\n"
+    where = ", ".join(f"{axis}={value:g}" for axis, value in ctx.position.items())
+    emit(args, result.to_dict(), f"{ctx.structure.name}, {args.method}: {args.seeds} runs per noise level"
+         + (f" at {where}" if where else "") + "\n"
          + result.to_text())
     return 0

@@ -334,6 +334,7 @@ def least_squares_fit(
     x_scale: Array | str = "jac",
     strategy: str | None = None,
     rng: RandomLike = None,
+    variance_floor: float = 0.0,
 ) -> Fitted:
     """:func:`fit_least_squares` with the cost it minimized: what an estimator's ``_fit`` returns so that
     :meth:`Estimator.cost_slice` can slice that cost (``cost`` is None where every start failed).
@@ -342,6 +343,10 @@ def least_squares_fit(
     ----------
     method, space, residuals, jacobian, starts, noise_variance, diagnostics, max_nfev, x_scale, strategy, rng
         As for :func:`fit_least_squares`.
+    variance_floor : float
+        Least residual variance the uncertainty uses where ``noise_variance`` is not given (residual units
+        squared): the precision to which the residuals are computed, so that a fit to noise-free data does not
+        claim intervals narrower than the arithmetic that found its optimum.
 
     Returns
     -------
@@ -403,6 +408,9 @@ def least_squares_fit(
                                                {"runs": runs, **(diagnostics or {})}))
     p = space.from_internal(best.x)
     jac_p = best.jac / space.value_jacobian(best.x)  # back to d r / d p in SI
+    if noise_variance is None and variance_floor > 0:
+        dof = max(best.fun.size - space.n, 1)
+        noise_variance = max(float(best.fun @ best.fun) / dof, variance_floor)
     unc = jacobian_uncertainty(names=space.names, values=p, jacobian=jac_p, residuals=best.fun,
                                noise_variance=noise_variance)
     at_bound = [

@@ -59,6 +59,11 @@ class ExactModalProblem:
         ``weights`` by the noise standard deviations.
     executor : Executor, optional
         A ``"threads"`` executor evaluates the sets side by side; any other (or None) runs them serially.
+    pairing : {"macxp", "mac"}
+        Pairing criterion; MACXP falls back to the MAC in a set whose reference or model damping is zero (MACXP
+        degenerates for undamped poles).
+    n_modes : int, optional
+        Only the lowest ``n_modes`` model modes (by undamped frequency) may be paired (default all).
 
     Examples
     --------
@@ -73,7 +78,7 @@ class ExactModalProblem:
 
     def __init__(self, model: NumericModel, space: ParameterSpace, reference: ModalData,
                  weights: tuple[float, float, float], noise: Sequence[float] | None = None,
-                 executor: Executor | None = None) -> None:
+                 executor: Executor | None = None, *, pairing: str = "macxp", n_modes: int | None = None) -> None:
         # the sets (positions) are independent: with a thread executor they are evaluated side by side (LAPACK
         # releases the GIL); elsewhere the problem's closures would be shipped for every evaluation, so serially
         self._runner = executor if executor is not None and executor.kind == "threads" else Executor("serial")
@@ -81,7 +86,8 @@ class ExactModalProblem:
         self.space = space
         self.reference = reference
         self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
-        self.engine = ModalEngine(model, sensors=list(reference.sensors))
+        self.pairing = pairing
+        self.engine = ModalEngine(model, sensors=list(reference.sensors), n_modes=n_modes)
         self.positions = [model.structure.resolve_position(s.position) for s in reference.sets]
         self.targets = [s.shapes / np.linalg.norm(s.shapes, axis=0, keepdims=True) for s in reference.sets]
         # residual divisors per set: (frequency, damping, shape per mode)
@@ -98,6 +104,7 @@ class ExactModalProblem:
         self.evaluations = 0
         self._count_lock = threading.Lock()
         self._cache: dict[bytes, tuple[Array, list[NDArray[np.intp]], list[CArray]]] = {}
+        self._criteria: dict[bytes, list[tuple[str, Array]]] = {}
 
     def _modes(self, params: Array, k: int) -> tuple[CArray, CArray]:
         batch = self.engine.evaluate(params, self.positions[k], exact=True)
@@ -139,15 +146,22 @@ class ExactModalProblem:
             return hit
         full = self.space.full(p)[None, :]
 
-        def one_set(k: int) -> tuple[Array, NDArray[np.intp], CArray]:
+        def one_set(k: int) -> tuple[Array, NDArray[np.intp], CArray, tuple[str, Array]]:
             poles, shapes = self._modes(full, k)
-            index, _ = _pair(shapes[0], poles[0], self.reference.sets[k])
-            return self._residual(poles, shapes, k, index)[0], index, poles[0][index]
+            data_set = self.reference.sets[k]
+            criterion = self.pairing
+            finite = poles[0][np.isfinite(poles[0]) & (np.abs(poles[0]) > 0)]
+            if criterion == "macxp" and (np.any(data_set.damping <= 0) or np.any(finite.real >= 0)):
+                criterion = "mac"
+            index, matrix = _pair(shapes[0], poles[0], data_set, criterion)
+            values = matrix[index, np.arange(index.size)]
+            return self._residual(poles, shapes, k, index)[0], index, poles[0][index], (criterion, values)
 
         parts = self._runner.map(one_set, range(len(self.reference.sets)))
-        out = (np.concatenate([r for r, _, _ in parts]), [index for _, index, _ in parts],
-               [paired for _, _, paired in parts])
+        out = (np.concatenate([r for r, _, _, _ in parts]), [index for _, index, _, _ in parts],
+               [paired for _, _, paired, _ in parts])
         self._cache = {key: out}
+        self._criteria = {key: [crit for _, _, _, crit in parts]}
         return out
 
     def residuals(self, p: Array) -> Array:
@@ -206,7 +220,7 @@ class ExactModalProblem:
             d_abs = (lam_r.conj() * d_lam).real / w_abs
             rows_f.append(d_abs / (2 * np.pi) / data_set.frequency)
             d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
-            rows_z.append(d_zeta / data_set.damping)
+            rows_z.append(d_zeta / data_set.damping if d_z > 0 else d_zeta)  # (an undamped reference: unused)
             dc = np.sum(da.conj() * x, axis=0)
             daa = 2 * np.sum((a.conj() * da).real, axis=0)
             de = da * (c / aa)[None, :] + a * (dc / aa)[None, :] - a * (c * daa / aa**2)[None, :]
@@ -234,8 +248,12 @@ class ExactModalProblem:
         Returns
         -------
         list of dict
-            Per reference set ``{"position": {...}, "model_mode": [model mode index (0-based) per reference mode]}``.
+            Per reference set ``{"position": {...}, "model_mode": [model mode index (0-based) per reference
+            mode], "criterion": "macxp" or "mac", "value": [its value per pair]}``.
         """
-        _, pairs, _ = self._evaluate(np.asarray(p, dtype=float))
-        return [{"position": dict(s.position), "model_mode": idx.tolist()}
-                for s, idx in zip(self.reference.sets, pairs, strict=True)]
+        p = np.asarray(p, dtype=float)
+        _, pairs, _ = self._evaluate(p)
+        criteria = self._criteria[p.tobytes()]
+        return [{"position": dict(s.position), "model_mode": idx.tolist(), "criterion": crit,
+                 "value": values.tolist()}
+                for s, idx, (crit, values) in zip(self.reference.sets, pairs, criteria, strict=True)]

@@ -3,9 +3,10 @@ repeated over noise levels and seeds, tabulated as mean and standard deviation o
 
 from __future__ import annotations
 
+import inspect
 import warnings
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -41,6 +42,9 @@ class StudyResult:
         Estimates (SI; nan where a run failed).
     success : ndarray of bool, shape (n_levels, n_seeds)
         Which runs converged.
+    position : dict
+        Axis position (m or rad) the time data and FRFs were simulated and estimated at (empty: the model's
+        default position; modal data carry theirs).
     """
 
     method: str
@@ -50,6 +54,7 @@ class StudyResult:
     seeds: tuple[int, ...]
     estimates: Array
     success: NDArray[np.bool_]
+    position: dict[str, float] = field(default_factory=dict)
 
     def summary(self) -> list[dict[str, Any]]:
         """One row per noise level and parameter: truth, mean, std, mean error in %, runs used."""
@@ -75,6 +80,7 @@ class StudyResult:
             "truth": dict(zip(self.names, self.truth.tolist(), strict=True)),
             "noise_levels": self.noise_levels.tolist(),
             "seeds": list(self.seeds),
+            "position": dict(self.position),
             "rows": [{k: clean(v) for k, v in row.items()} for row in self.summary()],
         }
 
@@ -106,6 +112,7 @@ def simulate_data(
     fs: float = 1000.0,
     duration: float = 4.0,
     band: tuple[float, float] | None = None,
+    position: Mapping[str, float] | None = None,
 ) -> Any:
     """Data of the kind a method takes, simulated at ``truth`` with relative noise ``noise``.
 
@@ -132,6 +139,9 @@ def simulate_data(
         Record length in s (time and FRF data).
     band : (float, float), optional
         Frequency band of the random forces in Hz (default ``(0, fs / 2.56)``).
+    position : mapping axis -> float, optional
+        Axis position (m or rad) the data are simulated at (default the model's default position); modal data
+        record it in their set.
 
     Returns
     -------
@@ -140,11 +150,12 @@ def simulate_data(
     from cappe.identify import estimate_frf, random_noise
     from cappe.systems import TimeData, time_response
 
-    system = model.system(model.structure.resolve_parameters(truth))
+    where = model.structure.resolve_position(position or {})
+    system = model.system(model.structure.resolve_parameters(truth), where)
     if kind == "modal":
         from cappe.modal import ModalEngine
 
-        modes = ModalEngine(model).modal_data(params=model.vector(model.structure.resolve_parameters(truth)))
+        modes = ModalEngine(model).modal_data([where], params=model.vector(model.structure.resolve_parameters(truth)))
         sets = []
         for s in modes.sets:
             shapes = s.shapes + noise * np.abs(s.shapes).max(axis=0) * (
@@ -180,6 +191,7 @@ def simulation_study(
     settings: Mapping[str, Any] | None = None,
     fs: float = 1000.0,
     duration: float = 4.0,
+    position: Mapping[str, float] | None = None,
 ) -> StudyResult:
     """Repeat simulate -> estimate for every noise level and seed.
 
@@ -205,6 +217,10 @@ def simulation_study(
         Sampling rate in Hz of simulated time and FRF data.
     duration : float
         Record length in s of simulated time and FRF data.
+    position : mapping axis -> float, optional
+        Axis position (m or rad) of the simulated time data and FRFs, passed to the estimators that take one
+        (default the model's default position). Methods whose reference modes carry the position of each set
+        (modal, feature map, hybrid, automated) refuse it.
 
     Returns
     -------
@@ -213,7 +229,7 @@ def simulation_study(
     Raises
     ------
     ModelError
-        ``method`` is not registered.
+        ``method`` is not registered, or a ``position`` is given to a method whose reference data carry it.
 
     Examples
     --------
@@ -229,6 +245,12 @@ def simulation_study(
     nm = model if isinstance(model, NumericModel) else NumericModel(model)
     cls = estimator_class(method)
     kind = METHODS[method][2]
+    options = dict(settings or {})
+    if "position" in inspect.signature(cls.__init__).parameters:
+        options.setdefault("position", nm.structure.resolve_position(position or {}))
+    elif position:
+        msg = f"a position does not apply to method {method!r}: its reference data carry the axis position of each set"
+        raise ModelError(msg)
     names = list(unknowns) if unknowns is not None else [p.name for p in nm.structure.parameters if p.unknown]
     truth_full = nm.structure.resolve_parameters(truth)
     levels = np.asarray(noise_levels, dtype=float)
@@ -237,8 +259,9 @@ def simulation_study(
     for i, level in enumerate(levels):
         for j, seed in enumerate(seeds):
             rng = np.random.default_rng([int(seed), i])
-            data = simulate_data(nm, kind, truth_full, noise=float(level), rng=rng, fs=fs, duration=duration)
-            estimator = cls(nm, names, start=start, rng=int(seed), **dict(settings or {}))
+            data = simulate_data(nm, kind, truth_full, noise=float(level), rng=rng, fs=fs, duration=duration,
+                                 position=options.get("position"))
+            estimator = cls(nm, names, start=start, rng=int(seed), **options)
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
                 result = estimator.fit(data).estimate_
@@ -246,4 +269,4 @@ def simulation_study(
                 estimates[i, j] = result.values
                 success[i, j] = True
     return StudyResult(method, tuple(names), np.array([truth_full[n] for n in names]), levels,
-                       tuple(int(s) for s in seeds), estimates, success)
+                       tuple(int(s) for s in seeds), estimates, success, dict(options.get("position") or {}))

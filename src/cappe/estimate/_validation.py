@@ -355,17 +355,21 @@ def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, o
     return np.asarray(np.einsum("jr,kr,fr->fjk", a, b, 1.0 / den), dtype=complex)
 
 
-def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet) -> tuple[NDArray[np.intp], Array]:
-    """One-to-one pairing by MACXP, maximal total (:func:`cappe.correlate.pair_modes`), of the model modes with a
-    finite nonzero pole: the model mode of each reference mode, and the MACXP matrix (n_model, m; zero rows for
-    the other model modes)."""
+def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet,
+          criterion: str = "macxp") -> tuple[NDArray[np.intp], Array]:
+    """One-to-one pairing by MACXP (or ``criterion="mac"``: shapes alone), maximal total
+    (:func:`cappe.correlate.pair_modes`), of the model modes with a finite nonzero pole: the model mode of each
+    reference mode, and the criterion matrix (n_model, m; zero rows for the other model modes)."""
     idx = np.flatnonzero(np.isfinite(model_poles) & (np.abs(model_poles) > 0))
     if idx.size < data_set.n_modes:
         msg = (f"only {idx.size} oscillatory model modes at position {data_set.position}; the reference has "
                f"{data_set.n_modes}")
         raise DataError(msg)
-    pairing = pair_modes(phi_a=model_shapes[:, idx], lam_a=model_poles[idx], phi_x=data_set.shapes,
-                         lam_x=data_set.poles, threshold=0.0)
+    if criterion == "mac":
+        pairing = pair_modes(phi_a=model_shapes[:, idx], phi_x=data_set.shapes, criterion="mac", threshold=0.0)
+    else:
+        pairing = pair_modes(phi_a=model_shapes[:, idx], lam_a=model_poles[idx], phi_x=data_set.shapes,
+                             lam_x=data_set.poles, threshold=0.0)
     model_of = np.empty(data_set.n_modes, dtype=np.intp)
     model_of[pairing.index_x] = idx[pairing.index_a]
     full = np.zeros((model_poles.size, data_set.n_modes))
