@@ -295,6 +295,8 @@ def _check_time(time: NDArray[np.float64]) -> None:
             f"is {step[first]:.9g} s, the typical (median) step is {typical:.9g} s"
         )
         raise DataError(msg)
+    if np.all(np.abs(step - typical) <= _UNIFORM_RTOL * typical):
+        return  # uniform to the rounding of binary floats: computed time vectors stop here
     k = np.arange(time.size, dtype=float)
     dt = float((time[-1] - time[0]) / (time.size - 1))
     # the grid through the stamps (least squares): the end points alone would carry their own rounding into it
