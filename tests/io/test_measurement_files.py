@@ -172,9 +172,9 @@ def test_property_csv_and_npz_round_trips_are_exact(tmp_path, names, unit, scale
 
 def test_format_selection_errors(tmp_path):
     data = TimeData.from_rate(10.0, {"a": [1.0, 2.0]})
-    with pytest.raises(DataError, match=r"cannot tell the format of .*run\.dat from its extension '\.dat'; use \.uff/\.unv \(UFF 58\), \.csv or \.npz"):
+    with pytest.raises(DataError, match=r"cannot tell the format of .*run\.dat from its extension '\.dat'; use \.uff/\.unv \(UFF 58\), \.csv, \.npz or \.lvm \(LabVIEW, read only\)"):
         write_time_data(tmp_path / "run.dat", data)
-    with pytest.raises(DataError, match=r"format must be one of \['uff', 'uff-binary', 'csv', 'npz'\] or None; got 'xlsx'"):
+    with pytest.raises(DataError, match=r"format must be one of \['uff', 'uff-binary', 'csv', 'npz', 'lvm'\] or None; got 'xlsx'"):
         read_frf(tmp_path / "run.csv", format="xlsx")
     for name in ("run.csv", "run.npz", "run.uff"):
         with pytest.raises(DataError, match=r"data must be a TimeData; got dict"):

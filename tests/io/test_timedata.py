@@ -103,3 +103,41 @@ def test_written_files_get_the_usual_permissions(tmp_path):
     mask = os.umask(0)
     os.umask(mask)
     assert path.stat().st_mode & 0o777 == 0o666 & ~mask  # not mkstemp's 0600
+
+
+def _daq_csv(path, fs, n, digits, jitter=0.0):
+    """A CSV as LabVIEW / DAQ software writes it: the time column with ``digits`` significant digits (``%.{d}g``,
+    written here from the exact grid k / fs, not by cappe), one sine channel."""
+    rng = np.random.default_rng(0)
+    t = np.arange(n) / fs + jitter * rng.standard_normal(n) / fs
+    rows = "\n".join(f"{v:.{digits}g},{np.sin(2 * np.pi * 50.0 * v):.6g}" for v in t)
+    path.write_text("time,acc\n" + rows + "\n")
+    return path
+
+
+@pytest.mark.parametrize(("fs", "n", "digits"), [(2048.0, 8192, 7), (51200.0, 60000, 7), (51200.0, 60000, 10),
+                                                 (2048.0, 8192, 10)])
+def test_daq_time_columns_rounded_to_their_digits_are_uniform(tmp_path, fs, n, digits):
+    # 7 digits at 51.2 kHz: t = 1.171855 s is written to 1e-6 s, 5 % of the step; such files were rejected as
+    # "not uniformly spaced" (the tolerance was 1e-6 of dt); now the rounding of t sets it, and no warning is due
+    import warnings
+
+    from cappe.io import read_time_data
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        data = read_time_data(_daq_csv(tmp_path / "daq.csv", fs, n, digits))
+    assert data.fs == pytest.approx(fs, rel=1e-6)
+    assert data.n_samples == n
+
+
+def test_real_jitter_warns_and_a_dropped_sample_stays_an_error(tmp_path):
+    from cappe.io import read_time_data
+
+    # 1 % rms timing jitter at 2048 Hz (10 digits: rounding is 1e-9 s, jitter ~5e-6 s): a warning naming the sample
+    with pytest.warns(DataWarning, match=r"time stamps jitter: sample \d+ .* from the uniform grid, more than the "
+                                         r"rounding of its 10 significant digits; .* uniformly sampled at 2048 Hz"):
+        read_time_data(_daq_csv(tmp_path / "jitter.csv", 2048.0, 4096, 10, jitter=0.01))
+    t = np.delete(np.round(np.arange(4096) / 2048.0, 6), 1000)
+    with pytest.raises(DataError, match=r"uniformly spaced \(missing or irregular samples\); the step after sample 999"):
+        TimeData.from_channels(t, {"a": np.zeros(t.size)})

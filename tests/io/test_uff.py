@@ -778,3 +778,20 @@ def test_missing_closing_line_is_refused(tmp_path, name, kind):
     with pytest.raises(DataError, match=rf"^dataset #{n} \(UFF {kind}\) of {re.escape(str(path))} ends before "
                                         r"its data is complete: the file stops without its closing '    -1' line"):
         read(path)
+
+
+def test_foreign_time_channels_named_in_id_line_1(tmp_path):
+    # microphone arrays and DAQ exports name each channel in ID line 1; those names are used when they name every
+    # channel differently, and ignored when one line is common to all datasets (then the DOF names stay)
+    t = np.arange(16) / 512.0
+    recs = [{"func_type": 1, "rsp_node": n, "rsp_dir": 0, "ref_node": 0, "ref_dir": 0, "x": t, "data": np.ones(16),
+             "id1": f"Mic {n:02d}"} for n in (1, 2, 3)]
+    back = read_uff_time_data(_foreign_58(tmp_path / "mics.uff", recs))
+    assert back.channels == ("Mic 01", "Mic 02", "Mic 03")
+    for r in recs:
+        r["id1"] = "NONE"
+    assert read_uff_time_data(_foreign_58(tmp_path / "none.uff", recs)).channels == ("1", "2", "3")
+    recs[2]["id1"] = "Mic 01"
+    recs[1]["id1"] = "Mic 01"
+    recs[0]["id1"] = "Mic 00"
+    assert read_uff_time_data(_foreign_58(tmp_path / "same.uff", recs)).channels == ("1", "2", "3")

@@ -27,9 +27,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--reference-side", choices=["auto", "inputs", "outputs"], default="auto",
                    help="references of the estimator: the measured inputs, or the outputs by reciprocity (roving "
                         "hammer: shapes at the hammer points); auto (default) takes the side with fewer channels")
-    p.add_argument("--bootstrap", type=int, default=50, metavar="N",
+    p.add_argument("--bootstrap", type=int, default=30, metavar="N",
                    help="bootstrap replicates for the standard deviations of frequency, damping and shapes "
-                        "(default 50; 0 skips them)")
+                        "(default 30; 0 skips them)")
     p.add_argument("--uff", metavar="FILE.uff", help="also write the modes as UFF 55 (outputs must be NODE:DIR)")
     p.add_argument("--plot", metavar="FILE.png", help="stabilization diagram with the selected poles")
     add_output_options(p)

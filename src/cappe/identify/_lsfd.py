@@ -622,7 +622,7 @@ def extract_modes(
     max_damping: float = 0.2,
     min_fraction: float = 0.3,
     reference_side: str = "auto",
-    n_bootstrap: int = 50,
+    n_bootstrap: int = 30,
     rng: RandomLike = 0,
 ) -> ModalExtraction:
     """Modal parameters from FRFs: (poly-reference) LSCF poles, stabilization, pole selection, LSFD, and the
@@ -668,7 +668,7 @@ def extract_modes(
         outputs (``"outputs"``, the hammer points become the shapes' points). ``"auto"`` (default) reads by
         reciprocity when there are more inputs than outputs and the outputs measure one quantity.
     n_bootstrap : int
-        Bootstrap replicates for the standard deviations (default 50; 0 skips them).
+        Bootstrap replicates for the standard deviations (default 30: the std to about 13 %; 0 skips them).
     rng : int, numpy Generator or None
         Seed of the bootstrap (default 0: the same data give the same standard deviations).
 

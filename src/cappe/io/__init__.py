@@ -2,6 +2,7 @@
 modes and UFF 15/2411 nodes, all written atomically."""
 
 from cappe.io.files import read_parameters, write_json, write_text
+from cappe.io.lvm import read_lvm_time_data
 from cappe.io.measurements import (
     FRF_NPZ_FORMAT,
     MEASUREMENT_FORMATS,
@@ -47,6 +48,7 @@ __all__ = [
     "match_channels",
     "modal_data_from_mapping",
     "read_frf",
+    "read_lvm_time_data",
     "read_measurements",
     "read_modal_data",
     "read_parameters",

@@ -18,6 +18,8 @@ Formats
     * Lines before the header that start with ``#`` are comments. cappe writes ``# window_decay: <s>`` and
       ``# output_quantities: ["displacement", ...]`` there (JSON values) when an FRF has them; other programs
       can skip them (pandas: ``comment="#"``).
+``.lvm``
+    LabVIEW measurement text files (read only, time data; see :mod:`cappe.io.lvm`).
 ``.npz``
     numpy archive. Time data: ``format = "cappe.timedata/1"``, ``time``, ``values`` (n_channels, n_samples),
     ``channels``, ``units``. FRFs: ``format = "cappe.frf/1"``, ``freq``, ``H`` (n_out, n_in, n_freq),
@@ -45,6 +47,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.io.files import atomic_path, finite_number, parse_json, read_text_file, shown, write_text
+from cappe.io.lvm import read_lvm_time_data
 from cappe.io.uff import (
     COHERENCE,
     FRF,
@@ -73,10 +76,10 @@ __all__ = [
     "write_time_data",
 ]
 
-MEASUREMENT_FORMATS = ("uff", "uff-binary", "csv", "npz")
+MEASUREMENT_FORMATS = ("uff", "uff-binary", "csv", "npz", "lvm")
 TIME_NPZ_FORMAT = "cappe.timedata/1"
 FRF_NPZ_FORMAT = "cappe.frf/1"
-_EXTENSIONS = {".uff": "uff", ".unv": "uff", ".csv": "csv", ".npz": "npz"}
+_EXTENSIONS = {".uff": "uff", ".unv": "uff", ".csv": "csv", ".npz": "npz", ".lvm": "lvm"}
 _UNIT = re.compile(r"^(?P<name>.*) \[(?P<unit>[^\[\]]*)\]$")
 _TIME_HEADER = re.compile(r"^time( \[s\])?$", re.IGNORECASE)
 _FREQ_HEADER = re.compile(r"^freq(uency)?( \[Hz\])?$", re.IGNORECASE)
@@ -94,11 +97,17 @@ def _format(path: Path, fmt: str | None) -> str:
     found = _EXTENSIONS.get(path.suffix.lower())
     if found is None:
         msg = (
-            f"cannot tell the format of {path} from its extension {path.suffix!r}; use .uff/.unv (UFF 58), .csv or "
-            f".npz, or pass format= one of {list(MEASUREMENT_FORMATS)}"
+            f"cannot tell the format of {path} from its extension {path.suffix!r}; use .uff/.unv (UFF 58), .csv, "
+            f".npz or .lvm (LabVIEW, read only), or pass format= one of {list(MEASUREMENT_FORMATS)}"
         )
         raise DataError(msg)
     return found
+
+
+def _read_only(p: Path, fmt: str, what: str) -> None:
+    if fmt == "lvm":
+        msg = f"cannot write {p}: cappe reads LabVIEW .lvm files but writes {what} as .uff, .csv or .npz"
+        raise DataError(msg)
 
 
 def _prefixed(p: Path, exc: DataError) -> DataError:
@@ -137,6 +146,7 @@ def write_time_data(path: str | Path, data: TimeData, *, format: str | None = No
     """
     p = Path(path)
     fmt = _format(p, format)
+    _read_only(p, fmt, "time data")
     if fmt in ("uff", "uff-binary"):
         return write_uff_time_data(p, data, binary=fmt == "uff-binary")  # validates data itself
     if not isinstance(data, TimeData):
@@ -196,6 +206,8 @@ def read_time_data(path: str | Path, *, format: str | None = None) -> TimeData: 
         return read_uff_time_data(p)
     if fmt == "csv":
         return _time_from_table(_read_table(p))
+    if fmt == "lvm":
+        return read_lvm_time_data(p)
     return _time_from_npz(p, _load_npz(p))
 
 
@@ -228,6 +240,7 @@ def write_frf(path: str | Path, frf: FRFData, *, format: str | None = None) -> P
     """
     p = Path(path)
     fmt = _format(p, format)
+    _read_only(p, fmt, "FRFs")
     if fmt in ("uff", "uff-binary"):
         return write_uff_frf(p, frf, binary=fmt == "uff-binary")  # validates frf itself
     check_frf(frf)
@@ -300,6 +313,9 @@ def read_frf(path: str | Path, *, format: str | None = None) -> FRFData:  # noqa
         return read_uff_frf(p)
     if fmt == "csv":
         return _frf_from_table(_read_table(p))
+    if fmt == "lvm":
+        msg = f"{p} is a LabVIEW measurement file of time data; estimate FRFs from it with `cappe frf`"
+        raise DataError(msg)
     return _frf_from_npz(p, _load_npz(p))
 
 
@@ -349,6 +365,8 @@ def read_measurements(path: str | Path, *, format: str | None = None) -> TimeDat
             f"supported: {SUPPORTED}"
         )
         raise DataError(msg)
+    if fmt == "lvm":
+        return read_lvm_time_data(p)
     if fmt == "csv":
         table = _read_table(p)
         first = table.header[0].strip()

@@ -509,9 +509,10 @@ def write_uff_time_data(path: str | Path, data: TimeData, *, binary: bool = Fals
 def read_uff_time_data(path: str | Path) -> TimeData:
     """Read the UFF 58 function type 1 (time response) datasets of a file as one TimeData.
 
-    Channels written by cappe keep their exact names and units. Channels of other programs are named from the
-    response node and direction, e.g. ``"12:+z"`` (``"12"`` for a scalar point); a repeated name gets a
-    ``" (dataset k)"`` suffix. Their units come from the ordinate axis-units label (empty when ``NONE``).
+    Channels written by cappe keep their exact names and units. Channels of other programs are named by their ID
+    line 1 (``"Mic 01"``) when it gives every such channel a different name, else from the response node and
+    direction, e.g. ``"12:+z"`` (``"12"`` for a scalar point); a repeated name gets a ``" (dataset k)"`` suffix.
+    Their units come from the ordinate axis-units label (empty when ``NONE``).
     All channels must share one time axis. Other datasets in the file are ignored.
 
     Parameters
@@ -536,6 +537,7 @@ def read_uff_time_data(path: str | Path) -> TimeData:
     names: list[str] = []
     units: list[str] = []
     rows: list[NDArray[np.float64]] = []
+    id_names: dict[int, str] = {}  # channel -> ID line 1, for channels of other programs
     time: NDArray[np.float64] | None = None
     first = 0
     for k, t in enumerate(types):
@@ -560,6 +562,7 @@ def read_uff_time_data(path: str | Path) -> TimeData:
             raise DataError(msg)
         name, unit = _time_channel_name(dset)
         if name is None:
+            id_names[len(names)] = str(dset.get("id1", "")).strip()
             name = _dof_name(int(dset["rsp_node"]), int(dset["rsp_dir"]))
             if name in names:
                 name = f"{name} (dataset {k + 1})"
@@ -569,6 +572,13 @@ def read_uff_time_data(path: str | Path) -> TimeData:
     if time is None:
         msg = f"{p} holds no time data (UFF 58 function type 1); found {_found(p, uff, types)}"
         raise DataError(msg)
+    # other programs name their channels in ID line 1 ("Mic 01"): used when it names every such channel, each
+    # differently (a line common to all datasets, like "Point" or "NONE", names none of them)
+    labels = list(id_names.values())
+    exact = {name for c, name in enumerate(names) if c not in id_names}
+    named = all(lab and lab.upper() != "NONE" for lab in labels)
+    if labels and named and len(set(labels)) == len(labels) and not set(labels) & exact:
+        names = [id_names.get(c, name) for c, name in enumerate(names)]
     try:
         return TimeData(time, np.array(rows), tuple(names), tuple(units) if any(units) else ())
     except DataError as exc:

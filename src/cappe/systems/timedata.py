@@ -19,9 +19,13 @@ from cappe.exceptions import DataError, DataWarning
 
 __all__ = ["TimeData", "check_clipping"]
 
-# A sampling grid is uniform when every step is within this fraction of the mean step; recorders write time
-# stamps with ~7 significant digits, so 1e-6 accepts rounding and rejects a dropped sample (100 % jump).
+# A sampling grid is uniform when every time stamp lies on the grid t0 + k dt within its own decimal rounding (a
+# recorder writing 7 significant digits rounds t = 9.999512 s to 1e-6 s, 2 % of a 51.2 kHz step) plus this
+# fraction of the step, which covers the rounding of binary floats.
 _UNIFORM_RTOL = 1e-6
+# Steps further than this fraction from the typical step are missing or irregular samples (an error); smaller
+# departures from the grid beyond the rounding are timing jitter (a warning).
+_JITTER_LIMIT = 0.1
 
 
 @dataclass(frozen=True)
@@ -283,7 +287,7 @@ def _check_time(time: NDArray[np.float64]) -> None:
         )
         raise DataError(msg)
     typical = float(np.median(step))
-    off = np.abs(step - typical) > _UNIFORM_RTOL * typical
+    off = np.abs(step - typical) > _JITTER_LIMIT * typical
     if np.any(off):
         first = int(np.flatnonzero(off)[0])
         msg = (
@@ -291,6 +295,62 @@ def _check_time(time: NDArray[np.float64]) -> None:
             f"is {step[first]:.9g} s, the typical (median) step is {typical:.9g} s"
         )
         raise DataError(msg)
+    if np.all(np.abs(step - typical) <= _UNIFORM_RTOL * typical):
+        return  # uniform to the rounding of binary floats: computed time vectors stop here
+    k = np.arange(time.size, dtype=float)
+    dt = float((time[-1] - time[0]) / (time.size - 1))
+    # the grid through the stamps (least squares): the end points alone would carry their own rounding into it
+    k_mean, t_mean = float(k.mean()), float(time.mean())
+    dt = float(np.dot(k - k_mean, time - t_mean) / np.dot(k - k_mean, k - k_mean)) if time.size > 2 else dt
+    off_grid = np.abs(time - (t_mean + (k - k_mean) * dt))
+    # half a unit of its last digit is a stamp's rounding; the grid fitted through all the rounded stamps errs by up
+    # to half a unit of the coarsest of them
+    quantum = _decimal_quantum(time)
+    allowed = 0.5 * (quantum + quantum.max()) + _UNIFORM_RTOL * dt
+    worst = int(np.argmax(off_grid - allowed))
+    if off_grid[worst] > allowed[worst]:
+        warnings.warn(
+            f"time stamps jitter: sample {worst} (t = {time[worst]:.10g} s) lies {off_grid[worst]:.3g} s "
+            f"({100 * off_grid[worst] / dt:.2g} % of the {dt:.6g} s step) from the uniform grid, more than the "
+            f"rounding of its {_significant_digits(time)} significant digits; the data are used as uniformly sampled "
+            f"at {1 / dt:.6g} Hz",
+            DataWarning,
+            stacklevel=4,
+        )
+
+
+def _significant_digits(time: NDArray[np.float64]) -> int:
+    """The fewest significant decimal digits that write every time stamp exactly (17 for computed floats)."""
+    nonzero = time[time != 0]
+    if nonzero.size == 0:
+        return 17
+    magnitude = np.abs(nonzero)
+    exponent = np.floor(np.log10(magnitude))
+    slack = 4 * np.spacing(magnitude)
+
+    def exact(digits: int) -> bool:
+        unit = 10.0 ** (exponent - digits + 1)
+        return bool(np.all(np.abs(np.round(nonzero / unit) * unit - nonzero) <= slack))
+
+    lo, hi = 1, 17  # exact at hi (by convention); exact at d implies exact at d + 1: bisect
+    while lo < hi:
+        mid = (lo + hi) // 2
+        if exact(mid):
+            hi = mid
+        else:
+            lo = mid + 1
+    return hi
+
+
+def _decimal_quantum(time: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The last written decimal unit of each time stamp (s): ``10**(e - d + 1)`` for a stamp ``m * 10**e`` written
+    with the file's ``d`` significant digits; the float spacing for computed time vectors."""
+    digits = _significant_digits(time)
+    magnitude = np.abs(time)
+    exponent = np.floor(np.log10(np.where(magnitude > 0, magnitude, 1.0)))
+    if digits >= 17:
+        return np.asarray(4 * np.spacing(magnitude), dtype=float)
+    return np.asarray(10.0 ** (exponent - digits + 1), dtype=float)
 
 
 def check_clipping(data: TimeData, *, min_run: int = 3, rtol: float = 1e-9) -> dict[str, float]:
