@@ -248,7 +248,7 @@ def _dense(matrix: Any, what: str, where: str) -> Array:
     if sps.issparse(matrix):
         if matrix.shape[0] > MAX_FLEXIBLE_DOF:
             msg = (f"{what} matrix has order {matrix.shape[0]}; a flexible body takes reduced matrices up to "
-                   f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+                   f"{MAX_FLEXIBLE_DOF} (give a 'reduction' to reduce the full model) ({where})")
             raise ModelError(msg)
         matrix = matrix.toarray()
     arr = np.asarray(matrix)
@@ -261,7 +261,7 @@ def _dense(matrix: Any, what: str, where: str) -> Array:
         raise ModelError(msg)
     if arr.shape[0] > MAX_FLEXIBLE_DOF:
         msg = (f"{what} matrix has order {arr.shape[0]}; a flexible body takes reduced matrices up to "
-               f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+               f"{MAX_FLEXIBLE_DOF} (give a 'reduction' to reduce the full model) ({where})")
         raise ModelError(msg)
     if not np.isfinite(arr).all():
         msg = f"{what} matrix has NaN or inf entries ({where})"
@@ -469,3 +469,88 @@ def matrix_source(value: object, base: Path | None, where: str) -> Any:
 
         return read_matrix(value, base, where)
     return value
+
+
+def reduced_body(body: str, mass: Any, stiffness: Any, nodes: object, interior_nodes: object, spec: object,
+                 where: str) -> tuple[Array, Array, tuple[InterfaceNode, ...], tuple[InterfaceNode, ...], Array | None]:
+    """A flexible body's Craig-Bampton model from its full matrices (the ``reduction`` entry of a model file).
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    mass, stiffness : sparse or dense matrix, shape (n, n)
+        Full FE matrices; node rows index them.
+    nodes : list of mappings
+        Interface nodes (rows of the full matrices): their DOFs are the boundary DOFs.
+    interior_nodes : list of mappings or None
+        Nodes to recover (rows of the full matrices).
+    spec : mapping
+        ``{band: Hz, multiple: 1.5}`` or ``{modes: n}``.
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    mass, stiffness : ndarray
+        Reduced matrices (boundary DOFs in node order, then the fixed-interface modal amplitudes).
+    nodes, interior : tuple of InterfaceNode
+        Nodes renumbered into the reduced coordinates and the recovery rows.
+    recovery : ndarray or None
+        Rows of the Craig-Bampton recovery matrix for the interior nodes.
+
+    Raises
+    ------
+    ModelError
+        The entry is malformed or the reduction impossible (the boundary does not hold the rigid-body motions).
+    """
+    from cappe.model.fe._reduction import craig_bampton
+
+    if not isinstance(spec, Mapping) or not set(spec) <= {"band", "multiple", "modes"} or (
+            ("band" in spec) == ("modes" in spec)):
+        msg = f"reduction takes {{band: Hz, multiple: 1.5}} or {{modes: n}}; got {spec!r} ({where}.reduction)"
+        raise ModelError(msg)
+    k_full = sps.csr_array(stiffness, dtype=float) if not sps.issparse(stiffness) else sps.csr_array(stiffness)
+    m_full = sps.csr_array(mass, dtype=float) if not sps.issparse(mass) else sps.csr_array(mass)
+    n = k_full.shape[0]
+    if k_full.shape != (n, n) or m_full.shape != (n, n):
+        msg = f"mass and stiffness must be square of the same order; got {m_full.shape} and {k_full.shape} ({where})"
+        raise ModelError(msg)
+    for label, mat in (("mass", m_full), ("stiffness", k_full)):
+        scale = float(abs(mat).max()) if mat.nnz else 0.0
+        if not np.isfinite(mat.data).all() or (mat.nnz and float(abs(mat - mat.T).max()) > SYMMETRY_RTOL * scale):
+            msg = f"{label} matrix must be finite and symmetric ({where}.{label})"
+            raise ModelError(msg)
+    interface = parse_nodes(body, nodes, n, f"{where}.nodes")
+    boundary = [r for node in interface for r in node.rows]
+    numbers = {key: spec[key] for key in ("band", "multiple", "modes") if key in spec}
+    for key, value in numbers.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+            msg = f"reduction {key} must be a positive number; got {value!r} ({where}.reduction.{key})"
+            raise ModelError(msg)
+    try:
+        red = craig_bampton(k_full, m_full, boundary, band=numbers.get("band"),
+                            multiple=float(numbers.get("multiple", 1.5)),
+                            n_modes=int(numbers["modes"]) if "modes" in numbers else None)
+    except ModelError as exc:
+        msg = f"{exc} ({where}.reduction)"
+        raise ModelError(msg) from exc
+    renumbered: list[InterfaceNode] = []
+    start = 0
+    for node in interface:
+        renumbered.append(InterfaceNode(node.name, node.point, node.dofs, tuple(range(start, start + len(node.dofs)))))
+        start += len(node.dofs)
+    interior: tuple[InterfaceNode, ...] = ()
+    recovery = None
+    if interior_nodes is not None:
+        found = parse_nodes(body, interior_nodes, n, f"{where}.recovery.nodes", interior=True)
+        rows = [r for node in found for r in node.rows]
+        recovery = np.array(red.recovery[rows], dtype=float)
+        recovery.setflags(write=False)
+        out: list[InterfaceNode] = []
+        start = 0
+        for node in found:
+            out.append(InterfaceNode(node.name, node.point, node.dofs, tuple(range(start, start + len(node.dofs)))))
+            start += len(node.dofs)
+        interior = tuple(out)
+    return red.mass, red.stiffness, tuple(renumbered), interior, recovery

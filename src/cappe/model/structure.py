@@ -46,6 +46,7 @@ from cappe.model.flexible import (
     modal_damping_matrix,
     parse_damping,
     parse_nodes,
+    reduced_body,
 )
 
 __all__ = [
@@ -1102,6 +1103,7 @@ class StructureBuilder:
         stiffness_scale: object = 1,
         damping: Mapping[str, object] | None = None,
         recovery: Mapping[str, object] | None = None,
+        reduction: Mapping[str, object] | None = None,
         description: str = "",
         where: str | None = None,
     ) -> None:
@@ -1125,7 +1127,12 @@ class StructureBuilder:
         damping : mapping, optional
             ``{modal: ratio or [ratios]}``, ``{rayleigh: [alpha, beta]}`` or ``{loss: eta}``.
         recovery : mapping, optional
-            ``{matrix: array or file spec (n_rec, n), nodes: [interior nodes, rows of the matrix]}``.
+            ``{matrix: array or file spec (n_rec, n), nodes: [interior nodes, rows of the matrix]}``; with
+            ``reduction``, only ``{nodes: [...]}`` (rows of the full matrices; the recovery matrix is the reduction's).
+        reduction : mapping, optional
+            ``{band: Hz, multiple: 1.5}`` or ``{modes: n}``: ``mass`` and ``stiffness`` are full (sparse) FE
+            matrices, node rows index them, and the body is their Craig-Bampton model with the interface nodes' DOFs
+            as boundary (:func:`cappe.model.fe.craig_bampton`).
         description : str
             Free text.
         where : str, optional
@@ -1141,9 +1148,23 @@ class StructureBuilder:
             msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
             raise ModelError(msg)
         self._claim("bodies", name, where)
-        m, k = checked_matrices(matrix_source(mass, self.base, f"{where}.mass"),
-                                matrix_source(stiffness, self.base, f"{where}.stiffness"), where)
-        interface = parse_nodes(name, nodes, m.shape[0], f"{where}.nodes")
+        interior: tuple[InterfaceNode, ...] = ()
+        rec = None
+        if reduction is not None:
+            if recovery is not None and (not isinstance(recovery, Mapping) or set(recovery) != {"nodes"}):
+                msg = (f"with a reduction, recovery gives only 'nodes' (rows of the full matrices); got {recovery!r} "
+                       f"({where}.recovery)")
+                raise ModelError(msg)
+            m_red, k_red, interface, interior, rec = reduced_body(
+                name, matrix_source(mass, self.base, f"{where}.mass"),
+                matrix_source(stiffness, self.base, f"{where}.stiffness"), nodes,
+                None if recovery is None else recovery["nodes"], reduction, where)
+            m, k = checked_matrices(m_red, k_red, where)
+            recovery = None
+        else:
+            m, k = checked_matrices(matrix_source(mass, self.base, f"{where}.mass"),
+                                    matrix_source(stiffness, self.base, f"{where}.stiffness"), where)
+            interface = parse_nodes(name, nodes, m.shape[0], f"{where}.nodes")
         scales = {}
         for label, value in (("mass_scale", mass_scale), ("stiffness_scale", stiffness_scale)):
             expr = self._expr(value, f"{where}.{label}")
@@ -1153,8 +1174,6 @@ class StructureBuilder:
                 raise ModelError(msg)
             scales[label] = expr
         damp = parse_damping(name, damping, self._expr, self._nominal_value, f"{where}.damping")
-        interior: tuple[InterfaceNode, ...] = ()
-        rec = None
         if recovery is not None:
             if not isinstance(recovery, Mapping) or set(recovery) != {"matrix", "nodes"}:
                 msg = f"recovery must give 'matrix' and 'nodes'; got {recovery!r} ({where}.recovery)"
@@ -1167,6 +1186,7 @@ class StructureBuilder:
                 raise ModelError(msg)
             rec.setflags(write=False)
             interior = parse_nodes(name, recovery["nodes"], rec.shape[0], f"{where}.recovery.nodes", interior=True)
+        if interior:
             clash = {n.name for n in interior} & {n.name for n in interface}
             if clash:
                 msg = f"interior node(s) {', '.join(sorted(clash))} already name interface nodes ({where}.recovery)"
