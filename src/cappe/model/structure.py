@@ -45,6 +45,7 @@ from cappe.model.flexible import (
     matrix_source,
     modal_damping_matrix,
     parse_damping,
+    parse_lines,
     parse_nodes,
     reduced_body,
 )
@@ -1104,6 +1105,7 @@ class StructureBuilder:
         damping: Mapping[str, object] | None = None,
         recovery: Mapping[str, object] | None = None,
         reduction: Mapping[str, object] | None = None,
+        lines: Sequence[Mapping[str, object]] | None = None,
         description: str = "",
         where: str | None = None,
     ) -> None:
@@ -1133,6 +1135,9 @@ class StructureBuilder:
             ``{band: Hz, multiple: 1.5}`` or ``{modes: n}``: ``mass`` and ``stiffness`` are full (sparse) FE
             matrices, node rows index them, and the body is their Craig-Bampton model with the interface nodes' DOFs
             as boundary (:func:`cappe.model.fe.craig_bampton`).
+        lines : list of mappings, optional
+            ``[{name, nodes: [n0, n1, ...]}]``: straight lines of interface nodes along which attachment points whose
+            coordinates depend on an axis travel (linear shape functions between the nodes).
         description : str
             Free text.
         where : str, optional
@@ -1191,6 +1196,7 @@ class StructureBuilder:
             if clash:
                 msg = f"interior node(s) {', '.join(sorted(clash))} already name interface nodes ({where}.recovery)"
                 raise ModelError(msg)
+        node_lines = parse_lines(name, lines, interface, f"{where}.lines")
         modal = modal_damping_matrix(m, k, damp.ratios) if damp.kind == "modal" else None
         if modal is not None:
             modal.setflags(write=False)
@@ -1208,6 +1214,7 @@ class StructureBuilder:
                 damping=damp,
                 modal_damping=modal,
                 description=str(description),
+                lines=node_lines,
             )
         )
 
@@ -1231,6 +1238,31 @@ class StructureBuilder:
         self._check_on_node(body, point, where, interior=interior)
         return point
 
+    def _check_on_line(self, flex: FlexibleBody, point: Vector3, where: str, *, interior: bool) -> None:
+        """A point on a flexible body that moves with an axis must travel along one of its lines of nodes, inside
+        the line at every listed axis position."""
+        shown_point = [str(v) for v in point]
+        if interior:
+            msg = (f"sensors and outputs sit on fixed nodes of flexible body {flex.name!r}; got {shown_point} "
+                   f"({where})")
+            raise ModelError(msg)
+        found = flex.line_through(point, self._evaluation_points())
+        if found is None:
+            lines = ", ".join(line.name for line in flex.lines) or "none declared"
+            msg = (f"a moving point on flexible body {flex.name!r} must travel along one of its lines of nodes "
+                   f"({lines}); {shown_point} does not ({where})")
+            raise ModelError(msg)
+        line, s = found
+        tol = 1e-9 * max(line.s[-1], 1.0)
+        for subs in self._evaluation_points():
+            value = float(s.xreplace(subs))
+            if not line.s[0] - tol <= value <= line.s[-1] + tol:
+                axes = {a.name for a in self._axes}
+                at = ", ".join(f"{k} = {float(v):.6g}" for k, v in subs.items() if str(k) in axes)
+                msg = (f"moving point {shown_point} leaves line {line.name!r} of flexible body {flex.name!r} "
+                       f"(s = {value:.6g} m, the line spans {line.s[0]:.6g} .. {line.s[-1]:.6g}) at {at} ({where})")
+                raise ModelError(msg)
+
     def _check_on_node(self, body: str, point: Vector3, where: str, *, interior: bool) -> None:
         """On a flexible body a point must be one of its nodes (interface nodes; interior ones for sensing)."""
         flex = self._flexible_named(body)
@@ -1241,9 +1273,8 @@ class StructureBuilder:
         except TypeError:
             coords = None
         if coords is None:
-            msg = (f"a point on flexible body {body!r} must be a fixed node; got {[str(v) for v in point]} "
-                   f"({where})")
-            raise ModelError(msg)
+            self._check_on_line(flex, point, where, interior=interior)
+            return
         if flex.node_at(coords, interior=interior) is None:
             kinds = "nodes" if interior else "interface nodes"
             msg = (f"point {coords} is not at one of flexible body {body!r}'s {kinds} "
