@@ -379,3 +379,16 @@ def test_moving_point_must_follow_a_line_of_nodes() -> None:
         _carriage_on_rail(["p", 0, 0.1], ["p", 0, 0.05])
     with pytest.raises(ModelError, match=r"moving point \['2\*p', '0', '0'\] leaves line 'rail' of flexible body 'beam' \(s = 2.4 m, the line spans 0 .. 1.2\) at p = 1.2 \(elements\[2\].points\[0\]\)"):
         _carriage_on_rail(["2*p", 0, 0.1], ["2*p", 0, 0])
+
+
+def test_recovery_matrix_from_a_file_is_rectangular(tmp_path: Path) -> None:
+    nodes, k, m = _beam()
+    rec = np.zeros((3, k.shape[0]))
+    rec[:, 6 * 3:6 * 3 + 3] = np.eye(3)
+    np.savez(tmp_path / "rec.npz", T=rec)
+    b = StructureBuilder("rec", base=tmp_path)
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
+                    recovery={"matrix": {"file": "rec.npz", "key": "T"},
+                              "nodes": [{"name": "c", "at": [0.0, 0.1, 0.0], "dofs": ["x", "y", "z"]}]})
+    b.sensor("c", body="beam", point="c")
+    np.testing.assert_array_equal(NumericModel(b.build()).sensor_matrix()[1], rec)

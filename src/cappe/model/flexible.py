@@ -499,13 +499,13 @@ def parse_damping(body: str, spec: object, expr: Callable[[object, str], sp.Expr
     return FlexibleDamping("loss", eta=eta)
 
 
-def matrix_source(value: object, base: Path | None, where: str) -> Any:
+def matrix_source(value: object, base: Path | None, where: str, *, square: bool = True) -> Any:
     """A matrix given in a model: an array (Python API), a sparse matrix, or a file spec read relative to
     ``base``."""
     if isinstance(value, (str, Mapping)):
         from cappe.model.fe._files import read_matrix
 
-        return read_matrix(value, base, where)
+        return read_matrix(value, base, where, square=square)
     return value
 
 

@@ -1183,7 +1183,7 @@ class StructureBuilder:
             if not isinstance(recovery, Mapping) or set(recovery) != {"matrix", "nodes"}:
                 msg = f"recovery must give 'matrix' and 'nodes'; got {recovery!r} ({where}.recovery)"
                 raise ModelError(msg)
-            raw = matrix_source(recovery["matrix"], self.base, f"{where}.recovery.matrix")
+            raw = matrix_source(recovery["matrix"], self.base, f"{where}.recovery.matrix", square=False)
             rec = np.array(raw.toarray() if hasattr(raw, "toarray") else raw, dtype=float)
             if rec.ndim != 2 or rec.shape[1] != m.shape[0] or not np.isfinite(rec).all():
                 msg = (f"recovery matrix must be finite with {m.shape[0]} columns (the body's coordinates); got "
