@@ -392,3 +392,11 @@ def test_recovery_matrix_from_a_file_is_rectangular(tmp_path: Path) -> None:
                               "nodes": [{"name": "c", "at": [0.0, 0.1, 0.0], "dofs": ["x", "y", "z"]}]})
     b.sensor("c", body="beam", point="c")
     np.testing.assert_array_equal(NumericModel(b.build()).sensor_matrix()[1], rec)
+
+
+def test_lagrange_derivation_refuses_flexible_models() -> None:
+    from cappe.model.lagrange import lagrange_matrices
+
+    b, _, _ = _coupled(None)
+    with pytest.raises(ModelError, match=r"model 'coupled' has flexible bodies \(beam\) given by numeric FE matrices: the Lagrange derivation is for rigid-body models"):
+        lagrange_matrices(b.build())
