@@ -400,3 +400,17 @@ def test_lagrange_derivation_refuses_flexible_models() -> None:
     b, _, _ = _coupled(None)
     with pytest.raises(ModelError, match=r"model 'coupled' has flexible bodies \(beam\) given by numeric FE matrices: the Lagrange derivation is for rigid-body models"):
         lagrange_matrices(b.build())
+
+
+def test_sensor_coordinates_on_a_flexible_body_are_its_nodes() -> None:
+    from cappe.modal import sensor_coordinates
+
+    nodes, k, m = _beam()
+    b = StructureBuilder("placed")
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes), position=[0.0, 0.5, 1.0])
+    b.element("left", bodies=["ground", "beam"], points=[[0.0, 0.5, 1.0], "n0"], stiffness={**SUPPORT, "rx": 5.0e4})
+    b.element("right", bodies=["ground", "beam"], at=[L_BEAM, 0.5, 1.0], stiffness=SUPPORT)
+    b.sensor("a", body="beam", point="n0")
+    b.sensor("b", body="beam", point="n2")
+    # the node's coordinates in the body frame plus the body's position
+    assert sensor_coordinates(b.build()) == {"a": (0.0, 0.5, 1.0), "b": (float(nodes[2, 0]), 0.5, 1.0)}
