@@ -5,6 +5,7 @@ from __future__ import annotations
 from benchmarks import (
     bench_automated,
     bench_estimate,
+    bench_flexible,
     bench_identify,
     bench_lm,
     bench_matrices,
@@ -22,6 +23,7 @@ from benchmarks import (
 def main() -> None:
     bench_matrices.main()
     bench_modal.main()
+    bench_flexible.main()
     bench_sobol.main()
     bench_identify.main()
     bench_estimate.main()

@@ -333,3 +333,84 @@ def test_interior_sensor_uses_the_recovery_matrix() -> None:
     assert labels == ["h:x", "h:y", "h:z"]
     np.testing.assert_array_equal(rows, rec)
     np.testing.assert_array_equal(nm.io_matrices()[1][0], rec[2])
+
+
+def _carriage_on_rail(position: object, point: object) -> StructureBuilder:
+    """A 30 kg carriage (y, z) on a guide shoe riding the beam at ``point``, the carriage at ``position``."""
+    nodes, k, m = _beam()
+    b = StructureBuilder("rail")
+    b.axis("p", [0.0, 0.3, 0.6, 1.2])
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
+                    lines=[{"name": "rail", "nodes": [f"n{i}" for i in range(N_NODES)]}])
+    _supported(b, "beam", "n0", f"n{N_NODES - 1}")
+    b.body("carriage", mass=30.0, dofs=["y", "z"], position=position)
+    b.element("shoe", bodies=["beam", "carriage"], points=[point, [0, 0, -0.1]],
+              stiffness={"y": 4.0e7, "z": 6.0e7})
+    return b
+
+
+def test_moving_interface_is_exact_at_nodes_and_continuous_in_between() -> None:
+    moving = NumericModel(_carriage_on_rail(["p", 0, 0.1], ["p", 0, 0]).build())
+    step = L_BEAM / (N_NODES - 1)
+    for node in (0, 2, 5):
+        fixed = NumericModel(_carriage_on_rail([node * step, 0, 0.1], f"n{node}").build())
+        # at a node: the model with the shoe fixed on that node; the shape functions there are 1 and 0 up to the
+        # rounding of the knots (1e-16), which a pair of close modes (33.47 / 33.49 Hz) amplifies to 1e-11
+        np.testing.assert_allclose(modal_batch(moving, position={"p": node * step}, n_modes=12).frequency,
+                                   modal_batch(fixed, n_modes=12).frequency, rtol=1e-9)
+    # continuity: the frequency change over a position step shrinks with the step (at a node and mid-element)
+    for centre in (2 * step, 2.5 * step):
+        jumps = []
+        for eps in (1e-3, 1e-5):
+            lo = modal_batch(moving, position={"p": centre - eps}, n_modes=12).frequency[0]
+            hi = modal_batch(moving, position={"p": centre + eps}, n_modes=12).frequency[0]
+            jumps.append(np.abs(hi - lo).max())
+        assert jumps[1] < 2e-2 * jumps[0] + 1e-9  # Lipschitz: 100 times smaller step, about 100 times smaller change
+    # over the whole travel, neighbouring positions 1 mm apart differ by little (no jumps between elements)
+    sweep = np.linspace(0.0, L_BEAM, 241)
+    freq = np.array([modal_batch(moving, position={"p": v}, n_modes=12).frequency[0] for v in sweep])
+    assert np.max(np.abs(np.diff(freq, axis=0)) / freq[:-1]) < 0.02
+    # the carriage's weight moves the frequencies: the position matters
+    assert np.ptp(freq[:, 6]) > 0.01 * freq[:, 6].mean()
+
+
+def test_moving_point_must_follow_a_line_of_nodes() -> None:
+    with pytest.raises(ModelError, match=r"a moving point on flexible body 'beam' must travel along one of its lines of nodes \(rail\); \['p', '0', '1/20'\] does not \(elements\[2\].points\[0\]\)"):
+        _carriage_on_rail(["p", 0, 0.1], ["p", 0, 0.05])
+    with pytest.raises(ModelError, match=r"moving point \['2\*p', '0', '0'\] leaves line 'rail' of flexible body 'beam' \(s = 2.4 m, the line spans 0 .. 1.2\) at p = 1.2 \(elements\[2\].points\[0\]\)"):
+        _carriage_on_rail(["2*p", 0, 0.1], ["2*p", 0, 0])
+
+
+def test_recovery_matrix_from_a_file_is_rectangular(tmp_path: Path) -> None:
+    nodes, k, m = _beam()
+    rec = np.zeros((3, k.shape[0]))
+    rec[:, 6 * 3:6 * 3 + 3] = np.eye(3)
+    np.savez(tmp_path / "rec.npz", T=rec)
+    b = StructureBuilder("rec", base=tmp_path)
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
+                    recovery={"matrix": {"file": "rec.npz", "key": "T"},
+                              "nodes": [{"name": "c", "at": [0.0, 0.1, 0.0], "dofs": ["x", "y", "z"]}]})
+    b.sensor("c", body="beam", point="c")
+    np.testing.assert_array_equal(NumericModel(b.build()).sensor_matrix()[1], rec)
+
+
+def test_lagrange_derivation_refuses_flexible_models() -> None:
+    from cappe.model.lagrange import lagrange_matrices
+
+    b, _, _ = _coupled(None)
+    with pytest.raises(ModelError, match=r"model 'coupled' has flexible bodies \(beam\) given by numeric FE matrices: the Lagrange derivation is for rigid-body models"):
+        lagrange_matrices(b.build())
+
+
+def test_sensor_coordinates_on_a_flexible_body_are_its_nodes() -> None:
+    from cappe.modal import sensor_coordinates
+
+    nodes, k, m = _beam()
+    b = StructureBuilder("placed")
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes), position=[0.0, 0.5, 1.0])
+    b.element("left", bodies=["ground", "beam"], points=[[0.0, 0.5, 1.0], "n0"], stiffness={**SUPPORT, "rx": 5.0e4})
+    b.element("right", bodies=["ground", "beam"], at=[L_BEAM, 0.5, 1.0], stiffness=SUPPORT)
+    b.sensor("a", body="beam", point="n0")
+    b.sensor("b", body="beam", point="n2")
+    # the node's coordinates in the body frame plus the body's position
+    assert sensor_coordinates(b.build()) == {"a": (0.0, 0.5, 1.0), "b": (float(nodes[2, 0]), 0.5, 1.0)}

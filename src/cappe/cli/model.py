@@ -196,7 +196,8 @@ def show(args: argparse.Namespace, ctx: ModelContext) -> int:
         ],
         "sensors": [{"name": n.name, "body": n.body, "point": [str(v) for v in n.point]} for n in s.sensors],
     }
-    lines = [f"model {s.name}: {s.n_dof} DOF, {len(s.bodies)} bodies, {len(s.elements)} elements"]
+    flexible = f", {len(s.flexible_bodies)} flexible" if s.flexible_bodies else ""
+    lines = [f"model {s.name}: {s.n_dof} DOF, {len(s.bodies)} bodies{flexible}, {len(s.elements)} elements"]
     if s.axes:
         lines.append("axes: " + ", ".join(f"{a.name} at {list(a.positions)} {a.unit}" for a in s.axes))
     lines.append("parameters:")

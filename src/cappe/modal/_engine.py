@@ -687,7 +687,8 @@ def _flatten(shapes: Array) -> Array:
 
 def _unflatten(flat: Array, m: int) -> Array:
     """The inverse layout of :func:`_flatten`: (rows, B m) -> C-contiguous (B, rows, m)."""
-    return np.ascontiguousarray(flat.reshape(flat.shape[0], -1, m).transpose(1, 0, 2))
+    # the batch size spelled out: a model without damping sources has no rows, and -1 cannot be inferred from 0
+    return np.ascontiguousarray(flat.reshape(flat.shape[0], flat.shape[1] // m, m).transpose(1, 0, 2))
 
 
 def _first(indices: NDArray[np.intp], k: int = 5) -> str:

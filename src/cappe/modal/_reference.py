@@ -286,7 +286,8 @@ def sensor_coordinates(
     subs.update({symbols[a]: v for a, v in zip(nm.axis_names, nm.position_vector(position), strict=True)})
     out: dict[str, tuple[float, float, float]] = {}
     for sensor in nm.structure.sensors:
-        origin = nm.structure.body(sensor.body).position
+        s = nm.structure
+        origin = s.flexible_body(sensor.body).position if s.is_flexible(sensor.body) else s.body(sensor.body).position
         xyz = [float(sp.sympify(o + q).xreplace(subs)) for o, q in zip(origin, sensor.point, strict=True)]
         out[sensor.name] = (xyz[0], xyz[1], xyz[2])
     return out

@@ -1,7 +1,7 @@
 """Structure descriptions, YAML model files, exact symbolic derivation, compiled numeric models, bearing stiffness."""
 
 from cappe.model.bearing import AngularContactBearing, BearingState
-from cappe.model.flexible import FlexibleBody, FlexibleDamping, InterfaceNode
+from cappe.model.flexible import FlexibleBody, FlexibleDamping, InterfaceNode, NodeLine
 from cappe.model.loader import FORMAT, load_model, structure_from_mapping
 from cappe.model.numeric import NumericModel, compile_model
 from cappe.model.structure import (
@@ -30,6 +30,7 @@ __all__ = [
     "FlexibleDamping",
     "Input",
     "InterfaceNode",
+    "NodeLine",
     "NumericModel",
     "Output",
     "Parameter",

@@ -35,7 +35,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import ModelError
 
-__all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode"]
+__all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode", "NodeLine"]
 
 Array = NDArray[np.float64]
 _DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
@@ -131,6 +131,8 @@ class FlexibleBody:
         ``C_0`` of modal damping at unit scales.
     description : str
         Free text.
+    lines : tuple of NodeLine
+        Lines of interface nodes that attachment points may travel along (their coordinates depend on an axis).
     """
 
     name: str
@@ -145,6 +147,7 @@ class FlexibleBody:
     damping: FlexibleDamping = field(default_factory=FlexibleDamping)
     modal_damping: Array | None = None
     description: str = ""
+    lines: tuple[NodeLine, ...] = ()
 
     @property
     def n_dof(self) -> int:
@@ -201,6 +204,41 @@ class FlexibleBody:
         k = int(np.argmin(dist))
         return candidates[k] if dist[k] <= 1e-9 * size else None
 
+    def line_through(self, point: Sequence[sp.Expr], samples: Sequence[Mapping[sp.Symbol, sp.Expr]],
+                     ) -> tuple[NodeLine, sp.Expr] | None:
+        """The line a moving point travels along and its line coordinate ``s`` as an expression, or None.
+
+        The point must lie on the line at every sample (parameter and axis values, typically the nominal
+        parameters at each listed axis position).
+
+        Parameters
+        ----------
+        point : sequence of 3 sympy expressions
+            Body-frame coordinates (m), depending on axis coordinates.
+        samples : sequence of mappings symbol -> value
+            Substitutions at which the point is checked.
+
+        Returns
+        -------
+        (NodeLine, sympy expression) or None
+        """
+        coords = np.array([n.point for n in self.nodes])
+        size = max(float(np.ptp(coords, axis=0).max()), 1.0)
+        for line in self.lines:
+            ok = True
+            for subs in samples:
+                try:
+                    values = [float(sp.sympify(v).xreplace(subs)) for v in point]
+                except (TypeError, ValueError):
+                    return None
+                if line.locate(values, size) is None:
+                    ok = False
+                    break
+            if ok:
+                s = sum(((point[a] - line.origin[a]) * line.direction[a] for a in range(3)), sp.Integer(0))
+                return line, sp.expand(s)
+        return None
+
     def matrix_terms(self) -> list[tuple[str, sp.Expr, Array, str]]:
         """The body's additive terms: (matrix name, coefficient, numeric block (n, n), label).
 
@@ -248,7 +286,7 @@ def _dense(matrix: Any, what: str, where: str) -> Array:
     if sps.issparse(matrix):
         if matrix.shape[0] > MAX_FLEXIBLE_DOF:
             msg = (f"{what} matrix has order {matrix.shape[0]}; a flexible body takes reduced matrices up to "
-                   f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+                   f"{MAX_FLEXIBLE_DOF} (give a 'reduction' to reduce the full model) ({where})")
             raise ModelError(msg)
         matrix = matrix.toarray()
     arr = np.asarray(matrix)
@@ -261,7 +299,7 @@ def _dense(matrix: Any, what: str, where: str) -> Array:
         raise ModelError(msg)
     if arr.shape[0] > MAX_FLEXIBLE_DOF:
         msg = (f"{what} matrix has order {arr.shape[0]}; a flexible body takes reduced matrices up to "
-               f"{MAX_FLEXIBLE_DOF} (reduce the full model first) ({where})")
+               f"{MAX_FLEXIBLE_DOF} (give a 'reduction' to reduce the full model) ({where})")
         raise ModelError(msg)
     if not np.isfinite(arr).all():
         msg = f"{what} matrix has NaN or inf entries ({where})"
@@ -461,11 +499,238 @@ def parse_damping(body: str, spec: object, expr: Callable[[object, str], sp.Expr
     return FlexibleDamping("loss", eta=eta)
 
 
-def matrix_source(value: object, base: Path | None, where: str) -> Any:
+def matrix_source(value: object, base: Path | None, where: str, *, square: bool = True) -> Any:
     """A matrix given in a model: an array (Python API), a sparse matrix, or a file spec read relative to
     ``base``."""
     if isinstance(value, (str, Mapping)):
         from cappe.model.fe._files import read_matrix
 
-        return read_matrix(value, base, where)
+        return read_matrix(value, base, where, square=square)
     return value
+
+
+def reduced_body(body: str, mass: Any, stiffness: Any, nodes: object, interior_nodes: object, spec: object,
+                 where: str) -> tuple[Array, Array, tuple[InterfaceNode, ...], tuple[InterfaceNode, ...], Array | None]:
+    """A flexible body's Craig-Bampton model from its full matrices (the ``reduction`` entry of a model file).
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    mass, stiffness : sparse or dense matrix, shape (n, n)
+        Full FE matrices; node rows index them.
+    nodes : list of mappings
+        Interface nodes (rows of the full matrices): their DOFs are the boundary DOFs.
+    interior_nodes : list of mappings or None
+        Nodes to recover (rows of the full matrices).
+    spec : mapping
+        ``{band: Hz, multiple: 1.5}`` or ``{modes: n}``.
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    mass, stiffness : ndarray
+        Reduced matrices (boundary DOFs in node order, then the fixed-interface modal amplitudes).
+    nodes, interior : tuple of InterfaceNode
+        Nodes renumbered into the reduced coordinates and the recovery rows.
+    recovery : ndarray or None
+        Rows of the Craig-Bampton recovery matrix for the interior nodes.
+
+    Raises
+    ------
+    ModelError
+        The entry is malformed or the reduction impossible (the boundary does not hold the rigid-body motions).
+    """
+    from cappe.model.fe._reduction import craig_bampton
+
+    if not isinstance(spec, Mapping) or not set(spec) <= {"band", "multiple", "modes"} or (
+            ("band" in spec) == ("modes" in spec)):
+        msg = f"reduction takes {{band: Hz, multiple: 1.5}} or {{modes: n}}; got {spec!r} ({where}.reduction)"
+        raise ModelError(msg)
+    k_full = sps.csr_array(stiffness, dtype=float) if not sps.issparse(stiffness) else sps.csr_array(stiffness)
+    m_full = sps.csr_array(mass, dtype=float) if not sps.issparse(mass) else sps.csr_array(mass)
+    n = k_full.shape[0]
+    if k_full.shape != (n, n) or m_full.shape != (n, n):
+        msg = f"mass and stiffness must be square of the same order; got {m_full.shape} and {k_full.shape} ({where})"
+        raise ModelError(msg)
+    for label, mat in (("mass", m_full), ("stiffness", k_full)):
+        scale = float(abs(mat).max()) if mat.nnz else 0.0
+        if not np.isfinite(mat.data).all() or (mat.nnz and float(abs(mat - mat.T).max()) > SYMMETRY_RTOL * scale):
+            msg = f"{label} matrix must be finite and symmetric ({where}.{label})"
+            raise ModelError(msg)
+    interface = parse_nodes(body, nodes, n, f"{where}.nodes")
+    boundary = [r for node in interface for r in node.rows]
+    numbers = {key: spec[key] for key in ("band", "multiple", "modes") if key in spec}
+    for key, value in numbers.items():
+        if isinstance(value, bool) or not isinstance(value, (int, float)) or not np.isfinite(value) or value <= 0:
+            msg = f"reduction {key} must be a positive number; got {value!r} ({where}.reduction.{key})"
+            raise ModelError(msg)
+    try:
+        red = craig_bampton(k_full, m_full, boundary, band=numbers.get("band"),
+                            multiple=float(numbers.get("multiple", 1.5)),
+                            n_modes=int(numbers["modes"]) if "modes" in numbers else None)
+    except ModelError as exc:
+        msg = f"{exc} ({where}.reduction)"
+        raise ModelError(msg) from exc
+    renumbered: list[InterfaceNode] = []
+    start = 0
+    for node in interface:
+        renumbered.append(InterfaceNode(node.name, node.point, node.dofs, tuple(range(start, start + len(node.dofs)))))
+        start += len(node.dofs)
+    interior: tuple[InterfaceNode, ...] = ()
+    recovery = None
+    if interior_nodes is not None:
+        found = parse_nodes(body, interior_nodes, n, f"{where}.recovery.nodes", interior=True)
+        rows = [r for node in found for r in node.rows]
+        recovery = np.array(red.recovery[rows], dtype=float)
+        recovery.setflags(write=False)
+        out: list[InterfaceNode] = []
+        start = 0
+        for node in found:
+            out.append(InterfaceNode(node.name, node.point, node.dofs, tuple(range(start, start + len(node.dofs)))))
+            start += len(node.dofs)
+        interior = tuple(out)
+    return red.mass, red.stiffness, tuple(renumbered), interior, recovery
+
+
+@dataclass(frozen=True)
+class NodeLine:
+    """A straight line of interface nodes along which an attachment point may travel (a guide rail).
+
+    A point on the line at distance ``s`` from its first node moves with the nodes' DOFs weighted by linear shape
+    functions (hat functions of ``s``): exactly the node's motion where the point sits on a node, continuous in
+    between; beyond the ends the end element's functions extrapolate.
+
+    Attributes
+    ----------
+    name : str
+        Line name.
+    nodes : tuple of str
+        Interface nodes in order along the line.
+    origin : tuple of 3 float
+        The first node's coordinates (m, body frame).
+    direction : tuple of 3 float
+        Unit vector from the first node to the last.
+    s : tuple of float
+        Each node's distance from the first (m), increasing.
+    """
+
+    name: str
+    nodes: tuple[str, ...]
+    origin: tuple[float, float, float]
+    direction: tuple[float, float, float]
+    s: tuple[float, ...]
+
+    def shape_functions(self, s: sp.Expr) -> list[sp.Expr]:
+        """Linear shape functions of the nodes at line coordinate ``s`` (m).
+
+        Parameters
+        ----------
+        s : sympy expression
+            Distance along the line from the first node (m).
+
+        Returns
+        -------
+        list of sympy expressions
+            One per node; they sum to 1.
+        """
+        knots = [sp.Float(v) for v in self.s]
+        k = len(knots)
+        out: list[sp.Expr] = []
+        for i in range(k):
+            pieces: list[tuple[sp.Expr, Any]] = []
+            if i > 1:
+                pieces.append((sp.Integer(0), s <= knots[i - 1]))
+            if i > 0:  # rising from the previous node (before the first segment: extrapolated from it)
+                pieces.append(((s - knots[i - 1]) / (knots[i] - knots[i - 1]), s <= knots[i] if i < k - 1 else True))
+            if i < k - 1:  # falling to the next node (after the last segment: extrapolated)
+                falling = (knots[i + 1] - s) / (knots[i + 1] - knots[i])
+                if i < k - 2:
+                    pieces.extend([(falling, s < knots[i + 1]), (sp.Integer(0), True)])
+                else:
+                    pieces.append((falling, True))
+            out.append(sp.Piecewise(*pieces))
+        return out
+
+    def locate(self, point: Sequence[float], size: float) -> float | None:
+        """The line coordinate of ``point`` (m), or None if it is off the line (more than 1e-9 ``size`` away).
+
+        Parameters
+        ----------
+        point : sequence of 3 float
+            Body-frame coordinates (m).
+        size : float
+            Length scale of the body (m).
+
+        Returns
+        -------
+        float or None
+        """
+        rel = np.asarray(point, dtype=float) - np.asarray(self.origin)
+        s = float(rel @ np.asarray(self.direction))
+        off = float(np.linalg.norm(rel - s * np.asarray(self.direction)))
+        return s if off <= 1e-9 * size else None
+
+
+def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], where: str) -> tuple[NodeLine, ...]:
+    """Lines of interface nodes ``[{name, nodes: [n0, n1, ...]}]`` (straight, at least two nodes, same DOFs).
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    entries : list of mappings or None
+        The ``lines`` entry.
+    nodes : sequence of InterfaceNode
+        The body's interface nodes.
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    tuple of NodeLine
+
+    Raises
+    ------
+    ModelError
+        An entry breaks a rule.
+    """
+    if entries is None:
+        return ()
+    if not isinstance(entries, (list, tuple)):
+        msg = f"flexible body {body!r} lines must be a list; got {entries!r} ({where})"
+        raise ModelError(msg)
+    by_name = {n.name: n for n in nodes}
+    coords = np.array([n.point for n in nodes])
+    size = max(float(np.ptp(coords, axis=0).max()), 1.0)
+    out: list[NodeLine] = []
+    for i, entry in enumerate(entries):
+        here = f"{where}[{i}]"
+        if (not isinstance(entry, Mapping) or set(entry) != {"name", "nodes"} or not isinstance(entry["name"], str)
+                or not isinstance(entry["nodes"], (list, tuple)) or len(entry["nodes"]) < 2):
+            msg = f"a line is {{name: NAME, nodes: [at least two interface nodes]}}; got {entry!r} ({here})"
+            raise ModelError(msg)
+        missing = [n for n in entry["nodes"] if n not in by_name]
+        if missing:
+            msg = f"line {entry['name']!r} names unknown interface node(s) {missing} ({here}.nodes)"
+            raise ModelError(msg)
+        members = [by_name[n] for n in entry["nodes"]]
+        if len({m.dofs for m in members}) != 1:
+            msg = f"the nodes of line {entry['name']!r} must carry the same DOFs ({here}.nodes)"
+            raise ModelError(msg)
+        first, last = np.array(members[0].point), np.array(members[-1].point)
+        span = float(np.linalg.norm(last - first))
+        if span <= 0:
+            msg = f"line {entry['name']!r} has no length ({here}.nodes)"
+            raise ModelError(msg)
+        direction = (last - first) / span
+        line = NodeLine(str(entry["name"]), tuple(entry["nodes"]), (float(first[0]), float(first[1]), float(first[2])),
+                        (float(direction[0]), float(direction[1]), float(direction[2])), ())
+        s = [line.locate(m.point, size) for m in members]
+        if any(v is None for v in s) or any(b <= a for a, b in zip(s, s[1:], strict=False)):  # type: ignore[operator]
+            msg = (f"the nodes of line {entry['name']!r} must lie on a straight line in the order given "
+                   f"({here}.nodes)")
+            raise ModelError(msg)
+        out.append(NodeLine(line.name, line.nodes, line.origin, line.direction, tuple(float(v) for v in s)))  # type: ignore[arg-type]
+    return tuple(out)

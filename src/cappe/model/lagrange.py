@@ -73,7 +73,8 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
     Raises
     ------
     ModelError
-        If a spinning body is not axisymmetric about its spin axis.
+        If a spinning body is not axisymmetric about its spin axis, or the model has flexible bodies (numeric FE
+        matrices have no energy expressions to derive from).
 
     Examples
     --------
@@ -83,6 +84,11 @@ def lagrange_matrices(structure: Structure) -> dict[str, sp.Matrix]:
     [k11 + k12,      -k12],
     [     -k12, k12 + k22]])
     """
+    if structure.flexible_bodies:
+        names = ", ".join(f.name for f in structure.flexible_bodies)
+        msg = (f"model '{structure.name}' has flexible bodies ({names}) given by numeric FE matrices: the Lagrange "
+               "derivation is for rigid-body models")
+        raise ModelError(msg)
     q: list[sp.Symbol] = []
     qd: list[sp.Symbol] = []
     ground = _Pose(sp.zeros(3, 1), sp.eye(3))

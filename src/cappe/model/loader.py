@@ -73,7 +73,7 @@ _KEYS = {
     "bodies": ({"name", "mass"}, {"inertia", "position", "com", "dofs", "spin", "description"}),
     "flexible_bodies": (
         {"name", "mass", "stiffness", "nodes"},
-        {"position", "mass_scale", "stiffness_scale", "damping", "recovery", "description"},
+        {"position", "mass_scale", "stiffness_scale", "damping", "recovery", "reduction", "lines", "description"},
     ),
     "elements": ({"name", "bodies"}, {"points", "at", "axes", "stiffness", "damping", "loss", "description"}),
     "inputs": ({"name", "body"}, {"point", "direction", "kind"}),

@@ -45,7 +45,9 @@ from cappe.model.flexible import (
     matrix_source,
     modal_damping_matrix,
     parse_damping,
+    parse_lines,
     parse_nodes,
+    reduced_body,
 )
 
 __all__ = [
@@ -1102,6 +1104,8 @@ class StructureBuilder:
         stiffness_scale: object = 1,
         damping: Mapping[str, object] | None = None,
         recovery: Mapping[str, object] | None = None,
+        reduction: Mapping[str, object] | None = None,
+        lines: Sequence[Mapping[str, object]] | None = None,
         description: str = "",
         where: str | None = None,
     ) -> None:
@@ -1125,7 +1129,15 @@ class StructureBuilder:
         damping : mapping, optional
             ``{modal: ratio or [ratios]}``, ``{rayleigh: [alpha, beta]}`` or ``{loss: eta}``.
         recovery : mapping, optional
-            ``{matrix: array or file spec (n_rec, n), nodes: [interior nodes, rows of the matrix]}``.
+            ``{matrix: array or file spec (n_rec, n), nodes: [interior nodes, rows of the matrix]}``; with
+            ``reduction``, only ``{nodes: [...]}`` (rows of the full matrices; the recovery matrix is the reduction's).
+        reduction : mapping, optional
+            ``{band: Hz, multiple: 1.5}`` or ``{modes: n}``: ``mass`` and ``stiffness`` are full (sparse) FE
+            matrices, node rows index them, and the body is their Craig-Bampton model with the interface nodes' DOFs
+            as boundary (:func:`cappe.model.fe.craig_bampton`).
+        lines : list of mappings, optional
+            ``[{name, nodes: [n0, n1, ...]}]``: straight lines of interface nodes along which attachment points whose
+            coordinates depend on an axis travel (linear shape functions between the nodes).
         description : str
             Free text.
         where : str, optional
@@ -1141,9 +1153,23 @@ class StructureBuilder:
             msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
             raise ModelError(msg)
         self._claim("bodies", name, where)
-        m, k = checked_matrices(matrix_source(mass, self.base, f"{where}.mass"),
-                                matrix_source(stiffness, self.base, f"{where}.stiffness"), where)
-        interface = parse_nodes(name, nodes, m.shape[0], f"{where}.nodes")
+        interior: tuple[InterfaceNode, ...] = ()
+        rec = None
+        if reduction is not None:
+            if recovery is not None and (not isinstance(recovery, Mapping) or set(recovery) != {"nodes"}):
+                msg = (f"with a reduction, recovery gives only 'nodes' (rows of the full matrices); got {recovery!r} "
+                       f"({where}.recovery)")
+                raise ModelError(msg)
+            m_red, k_red, interface, interior, rec = reduced_body(
+                name, matrix_source(mass, self.base, f"{where}.mass"),
+                matrix_source(stiffness, self.base, f"{where}.stiffness"), nodes,
+                None if recovery is None else recovery["nodes"], reduction, where)
+            m, k = checked_matrices(m_red, k_red, where)
+            recovery = None
+        else:
+            m, k = checked_matrices(matrix_source(mass, self.base, f"{where}.mass"),
+                                    matrix_source(stiffness, self.base, f"{where}.stiffness"), where)
+            interface = parse_nodes(name, nodes, m.shape[0], f"{where}.nodes")
         scales = {}
         for label, value in (("mass_scale", mass_scale), ("stiffness_scale", stiffness_scale)):
             expr = self._expr(value, f"{where}.{label}")
@@ -1153,13 +1179,11 @@ class StructureBuilder:
                 raise ModelError(msg)
             scales[label] = expr
         damp = parse_damping(name, damping, self._expr, self._nominal_value, f"{where}.damping")
-        interior: tuple[InterfaceNode, ...] = ()
-        rec = None
         if recovery is not None:
             if not isinstance(recovery, Mapping) or set(recovery) != {"matrix", "nodes"}:
                 msg = f"recovery must give 'matrix' and 'nodes'; got {recovery!r} ({where}.recovery)"
                 raise ModelError(msg)
-            raw = matrix_source(recovery["matrix"], self.base, f"{where}.recovery.matrix")
+            raw = matrix_source(recovery["matrix"], self.base, f"{where}.recovery.matrix", square=False)
             rec = np.array(raw.toarray() if hasattr(raw, "toarray") else raw, dtype=float)
             if rec.ndim != 2 or rec.shape[1] != m.shape[0] or not np.isfinite(rec).all():
                 msg = (f"recovery matrix must be finite with {m.shape[0]} columns (the body's coordinates); got "
@@ -1167,10 +1191,12 @@ class StructureBuilder:
                 raise ModelError(msg)
             rec.setflags(write=False)
             interior = parse_nodes(name, recovery["nodes"], rec.shape[0], f"{where}.recovery.nodes", interior=True)
+        if interior:
             clash = {n.name for n in interior} & {n.name for n in interface}
             if clash:
                 msg = f"interior node(s) {', '.join(sorted(clash))} already name interface nodes ({where}.recovery)"
                 raise ModelError(msg)
+        node_lines = parse_lines(name, lines, interface, f"{where}.lines")
         modal = modal_damping_matrix(m, k, damp.ratios) if damp.kind == "modal" else None
         if modal is not None:
             modal.setflags(write=False)
@@ -1188,6 +1214,7 @@ class StructureBuilder:
                 damping=damp,
                 modal_damping=modal,
                 description=str(description),
+                lines=node_lines,
             )
         )
 
@@ -1211,6 +1238,31 @@ class StructureBuilder:
         self._check_on_node(body, point, where, interior=interior)
         return point
 
+    def _check_on_line(self, flex: FlexibleBody, point: Vector3, where: str, *, interior: bool) -> None:
+        """A point on a flexible body that moves with an axis must travel along one of its lines of nodes, inside
+        the line at every listed axis position."""
+        shown_point = [str(v) for v in point]
+        if interior:
+            msg = (f"sensors and outputs sit on fixed nodes of flexible body {flex.name!r}; got {shown_point} "
+                   f"({where})")
+            raise ModelError(msg)
+        found = flex.line_through(point, self._evaluation_points())
+        if found is None:
+            lines = ", ".join(line.name for line in flex.lines) or "none declared"
+            msg = (f"a moving point on flexible body {flex.name!r} must travel along one of its lines of nodes "
+                   f"({lines}); {shown_point} does not ({where})")
+            raise ModelError(msg)
+        line, s = found
+        tol = 1e-9 * max(line.s[-1], 1.0)
+        for subs in self._evaluation_points():
+            value = float(s.xreplace(subs))
+            if not line.s[0] - tol <= value <= line.s[-1] + tol:
+                axes = {a.name for a in self._axes}
+                at = ", ".join(f"{k} = {float(v):.6g}" for k, v in subs.items() if str(k) in axes)
+                msg = (f"moving point {shown_point} leaves line {line.name!r} of flexible body {flex.name!r} "
+                       f"(s = {value:.6g} m, the line spans {line.s[0]:.6g} .. {line.s[-1]:.6g}) at {at} ({where})")
+                raise ModelError(msg)
+
     def _check_on_node(self, body: str, point: Vector3, where: str, *, interior: bool) -> None:
         """On a flexible body a point must be one of its nodes (interface nodes; interior ones for sensing)."""
         flex = self._flexible_named(body)
@@ -1221,9 +1273,8 @@ class StructureBuilder:
         except TypeError:
             coords = None
         if coords is None:
-            msg = (f"a point on flexible body {body!r} must be a fixed node; got {[str(v) for v in point]} "
-                   f"({where})")
-            raise ModelError(msg)
+            self._check_on_line(flex, point, where, interior=interior)
+            return
         if flex.node_at(coords, interior=interior) is None:
             kinds = "nodes" if interior else "interface nodes"
             msg = (f"point {coords} is not at one of flexible body {body!r}'s {kinds} "

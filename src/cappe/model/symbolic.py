@@ -8,6 +8,7 @@ on the geometry (and so on the axis coordinates). This is the affine structure t
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from functools import cached_property
@@ -218,9 +219,8 @@ class SymbolicModel:
         flex = self._flexible[body]
         try:
             coords = [float(v) for v in point]
-        except TypeError as exc:
-            msg = f"a point on flexible body {body!r} must be a fixed node; got {[str(v) for v in point]}"
-            raise ModelError(msg) from exc
+        except TypeError:
+            return self._line_rows(body, point, rotation=rotation)
         node = flex.node_at(coords)
         if node is None:
             msg = f"point {coords} is not at a node of flexible body {body!r}"
@@ -239,6 +239,36 @@ class SymbolicModel:
                 assert flex.recovery is not None  # interior nodes come with their recovery matrix
                 rows.append({start + j: sp.Float(float(v)) for j, v in enumerate(flex.recovery[r]) if v != 0})
         return rows
+
+    def _line_rows(self, body: str, point: Sequence[sp.Expr], *, rotation: bool) -> list[SparseRow]:
+        """Rows of a point travelling along a line of a flexible body's nodes: the nodes' DOFs weighted by the
+        line's shape functions at the point's line coordinate."""
+        flex = self._flexible[body]
+        found = flex.line_through(point, self._samples())
+        if found is None:
+            msg = (f"a moving point on flexible body {body!r} must travel along one of its lines of nodes; got "
+                   f"{[str(v) for v in point]}")
+            raise ModelError(msg)
+        line, s = found
+        start = self._offset[body]
+        weights = line.shape_functions(s)
+        names = DIRECTIONS[3:] if rotation else DIRECTIONS[:3]
+        rows: list[SparseRow] = []
+        for d in names:
+            row: SparseRow = {}
+            for node_name, weight in zip(line.nodes, weights, strict=True):
+                node = flex.node(node_name)
+                r = None if node is None else node.row(d)
+                if r is not None:
+                    row[start + r] = weight
+            rows.append(row)
+        return rows
+
+    def _samples(self) -> list[dict[sp.Symbol, sp.Expr]]:
+        """Nominal parameters at every combination of the listed axis positions (where moving points are checked)."""
+        params = {symbol(p.name): sp.Float(p.value) for p in self.structure.parameters}
+        grids = [[(symbol(a.name), sp.Float(v)) for v in (a.positions or (0.0,))] for a in self.structure.axes]
+        return [{**params, **dict(combo)} for combo in itertools.product(*grids)]
 
     def _require_components(self, body: str, rows: list[SparseRow], direction: Sequence[sp.Expr], rotation: bool,
                             what: str) -> None:

@@ -28,8 +28,9 @@ _SUFFIXES = (".mtx", ".mat", ".npz")
 MatrixSpec = str | Mapping[str, object]
 
 
-def read_matrix(spec: object, base: Path | None, where: str) -> sps.csr_array | NDArray[np.float64]:
-    """One real square matrix from a file named by ``spec``, relative to ``base`` (the model file's folder).
+def read_matrix(spec: object, base: Path | None, where: str, *, square: bool = True,
+                ) -> sps.csr_array | NDArray[np.float64]:
+    """One real (square) matrix from a file named by ``spec``, relative to ``base`` (the model file's folder).
 
     Parameters
     ----------
@@ -40,10 +41,12 @@ def read_matrix(spec: object, base: Path | None, where: str) -> sps.csr_array | 
         Folder relative paths start from (None: the working directory).
     where : str
         The model entry, for messages (``"model.yaml, flexible_bodies[0].stiffness"``).
+    square : bool
+        Require a square matrix (a recovery matrix is rectangular).
 
     Returns
     -------
-    scipy.sparse.csr_array or ndarray, shape (n, n)
+    scipy.sparse.csr_array or ndarray, shape (n, n) or (n_rows, n)
         Sparse where the file stores it sparse, dense otherwise; float64.
 
     Raises
@@ -81,19 +84,19 @@ def read_matrix(spec: object, base: Path | None, where: str) -> sps.csr_array | 
         if suffix == ".mtx":
             _no_key(key, where)
             info = scipy.io.mminfo(str(path))
-            _check_shape((int(info[0]), int(info[1])), path, where)
+            _check_shape((int(info[0]), int(info[1])), path, where, square)
             raw: object = scipy.io.mmread(str(path))
         elif suffix == ".mat":
-            raw = _from_mat(path, key, where)
+            raw = _from_mat(path, key, where, square)
         else:
-            raw = _from_npz(path, key, where)
+            raw = _from_npz(path, key, where, square)
     except ModelError:
         raise
     except (OSError, ValueError, TypeError, KeyError, IndexError, NotImplementedError, EOFError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         msg = f"cannot read matrix file {path}: {reason} ({where})"
         raise ModelError(msg) from exc
-    return _as_matrix(raw, path, where)
+    return _as_matrix(raw, path, where, square)
 
 
 def _no_key(key: str | None, where: str) -> None:
@@ -102,19 +105,19 @@ def _no_key(key: str | None, where: str) -> None:
         raise ModelError(msg)
 
 
-def _from_mat(path: Path, key: str | None, where: str) -> object:
+def _from_mat(path: Path, key: str | None, where: str, square: bool) -> object:
     names = [entry[0] for entry in scipy.io.whosmat(str(path))]
     key = _choose(names, key, path, where)
     shape = next(entry[1] for entry in scipy.io.whosmat(str(path)) if entry[0] == key)
-    _check_shape(tuple(int(v) for v in shape), path, where)
+    _check_shape(tuple(int(v) for v in shape), path, where, square)
     return scipy.io.loadmat(str(path), variable_names=[key])[key]
 
 
-def _from_npz(path: Path, key: str | None, where: str) -> object:
+def _from_npz(path: Path, key: str | None, where: str, square: bool) -> object:
     with np.load(path, allow_pickle=False) as data:
         names = list(data.files)
         if key is None and {"format", "data", "indices", "indptr", "shape"} <= set(names):
-            _check_shape(tuple(int(v) for v in data["shape"]), path, where)
+            _check_shape(tuple(int(v) for v in data["shape"]), path, where, square)
             return sps.load_npz(path)
         key = _choose(names, key, path, where)
         return np.asarray(data[key])
@@ -132,16 +135,16 @@ def _choose(names: list[str], key: str | None, path: Path, where: str) -> str:
     return key
 
 
-def _check_shape(shape: tuple[int, ...], path: Path, where: str) -> None:
-    if len(shape) != 2 or shape[0] != shape[1]:
-        msg = f"matrix in {path} must be square; got shape {shape} ({where})"
+def _check_shape(shape: tuple[int, ...], path: Path, where: str, square: bool = True) -> None:
+    if len(shape) != 2 or (square and shape[0] != shape[1]):
+        msg = f"matrix in {path} must be {'square' if square else 'two-dimensional'}; got shape {shape} ({where})"
         raise ModelError(msg)
-    if shape[0] > MAX_MATRIX_SIZE:
-        msg = f"matrix in {path} has order {shape[0]}, beyond the {MAX_MATRIX_SIZE} cappe reads ({where})"
+    if max(shape) > MAX_MATRIX_SIZE:
+        msg = f"matrix in {path} has {max(shape)} rows or columns, beyond the {MAX_MATRIX_SIZE} cappe reads ({where})"
         raise ModelError(msg)
 
 
-def _as_matrix(raw: object, path: Path, where: str) -> sps.csr_array | NDArray[np.float64]:
+def _as_matrix(raw: object, path: Path, where: str, square: bool) -> sps.csr_array | NDArray[np.float64]:
     if sps.issparse(raw):
         out: sps.csr_array | NDArray[np.float64] = sps.csr_array(raw)
         values = out.data
@@ -151,7 +154,7 @@ def _as_matrix(raw: object, path: Path, where: str) -> sps.csr_array | NDArray[n
             msg = f"matrix in {path} must hold real numbers; got {arr.dtype} ({where})"
             raise ModelError(msg)
         out = values = np.array(arr, dtype=np.float64)
-    _check_shape(tuple(out.shape), path, where)
+    _check_shape(tuple(out.shape), path, where, square)
     if np.iscomplexobj(values):
         msg = f"matrix in {path} must be real; got complex entries ({where})"
         raise ModelError(msg)

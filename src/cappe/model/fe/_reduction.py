@@ -118,6 +118,12 @@ def craig_bampton(stiffness: ArrayLike | sps.sparray, mass: ArrayLike | sps.spar
         msg = "the interior stiffness K_ii is singular: the boundary DOFs must hold the body's rigid-body motions"
         raise ModelError(msg)
     lam, phi = _fixed_interface_modes(k_ii, m_ii, lu, band, multiple, n_modes)
+    # a rigid-body motion left to the interior shows as a zero fixed-interface eigenvalue (splu may not notice a
+    # matrix singular only to round-off); the scale is the largest diagonal ratio, about the largest omega^2
+    scale = float((k_ii.diagonal() / np.maximum(m_ii.diagonal(), 1e-300)).max())
+    if lam.size and lam[0] <= 1e-9 * scale:
+        msg = "the interior stiffness K_ii is singular: the boundary DOFs must hold the body's rigid-body motions"
+        raise ModelError(msg)
     t = np.zeros((n, b.size + lam.size))
     t[b, np.arange(b.size)] = 1.0
     t[np.ix_(interior, np.arange(b.size))] = psi
