@@ -343,3 +343,65 @@ def test_conditions_it_cannot_judge_are_said_and_recorded(monitored: Path, capsy
     assert code == 0
     assert "ALARM" not in out
     assert "temperature 77 is implausible for this machine" in out
+
+
+# ------------------------------------------------------------------------------------------------- monitor watch
+
+
+def test_watch_survives_a_kill_and_a_restart_mid_folder(healthy_csv: Path, tmp_path: Path) -> None:
+    """A real process is killed (SIGKILL) while it works through a folder; the restarted one finishes it: every
+    file recorded once, none lost, none repeated."""
+    import os
+    import shutil
+    import signal
+    import subprocess
+    import sys
+
+    import cappe
+
+    shutil.copyfile(healthy_csv / "template.db", tmp_path / "s.db")
+    assert main(["monitor", "simulate", "healthy", "--store", str(tmp_path / "s.db"), "-n", "10", "--format", "csv",
+                 "--seed", "6", "-o", str(tmp_path / "in")]) == 0
+    files = sorted((tmp_path / "in").glob("*.csv"))
+    env = {**os.environ, "PYTHONPATH": str(Path(cappe.__file__).parents[1])}
+    argv = [sys.executable, "-m", "cappe", "monitor", "watch", str(tmp_path / "s.db"), str(tmp_path / "in"),
+            "--interval", "0.2", "--settle", "0"]
+    with open(tmp_path / "first.log", "w") as log:
+        first = subprocess.Popen(argv, env=env, stdout=log, stderr=subprocess.STDOUT)
+        try:
+            deadline = time.monotonic() + 300
+            while len(_sources(tmp_path / "s.db")) < 3:  # killed mid-folder, after a few files
+                assert first.poll() is None, (tmp_path / "first.log").read_text()
+                assert time.monotonic() < deadline
+                time.sleep(0.05)
+            first.send_signal(signal.SIGKILL)
+        finally:
+            first.kill()
+            first.wait()
+    recorded = _sources(tmp_path / "s.db")
+    assert 3 <= len(recorded) < len(files)
+    second = subprocess.run([*argv, "--once"], env=env, capture_output=True, text=True, timeout=300, check=False)
+    assert second.returncode == 0, second.stdout + second.stderr
+    assert f"{len(files) - len(recorded)} ingested, {len(recorded)} skipped (recorded already), 0 failed" \
+        in second.stdout
+    sources = _sources(tmp_path / "s.db")
+    assert sorted(sources) == sorted(str(f) for f in files)  # each once: none lost, none repeated
+    with HistoryStore(tmp_path / "s.db") as history:  # times and conditions from the folder's scenario.json
+        manifest = json.loads((tmp_path / "in/scenario.json").read_text())["measurements"]
+        by_source = {r.source: r for r in history.measurements("m")}
+        for entry in manifest:
+            record = by_source[str(tmp_path / "in" / entry["file"])]
+            assert record.conditions == pytest.approx(entry["conditions"])
+            assert record.timestamp.isoformat().startswith(entry["timestamp"][:19])
+
+
+def test_watch_reports_a_bad_file_and_goes_on(ingest_dir: Path, capsys) -> None:
+    folder = ingest_dir / "in"
+    folder.mkdir()
+    for name in ("a1.csv", "b.csv", "c.csv"):
+        (folder / name).write_bytes((ingest_dir / name).read_bytes())
+    code, out, _ = run(capsys, "monitor", "watch", "s.db", folder, "--once", "--settle", "0")
+    assert code == 1
+    assert re.search(r"error: .*b.csv: .*; not retried until the file changes", out)
+    assert "2 ingested, 0 skipped (recorded already), 1 failed" in out
+    assert sorted(_sources(ingest_dir / "s.db")) == [str(folder / "a1.csv"), str(folder / "c.csv")]

@@ -1,8 +1,9 @@
 """The monitoring-chain commands of ``cappe monitor`` (thesis Fig. 1.1 over a history store).
 
 ``init`` records a machine (model, channels, components, alarm rules); ``simulate`` writes scenario data;
-``ingest`` runs the chain on measurement files; ``baseline`` learns the healthy state from recorded
-measurements; ``status``, ``history`` and ``alarms`` read the store; ``serve`` starts the dashboard.
+``ingest`` runs the chain on measurement files; ``watch`` ingests files as they arrive in a folder;
+``baseline`` learns the healthy state from recorded measurements; ``status``, ``history`` and ``alarms`` read
+the store; ``serve`` starts the dashboard.
 """
 
 from __future__ import annotations
@@ -92,6 +93,25 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
                    help="operating condition of the measurement, e.g. temperature=24.5 (repeatable)")
     p.set_defaults(func=ingest)
 
+    p = cmds.add_parser("watch", help="ingest measurement files as they arrive in a folder",
+                        usage="cappe monitor watch STORE DIR [--machine ID] [options]",
+                        description="Poll DIR and run the chain on every new measurement file (UFF 58, CSV, npz) "
+                                    "in this one process, oldest first, once its size has stopped changing. A "
+                                    "file recorded already (by its content) is skipped, so a watch that was killed "
+                                    "or restarted goes on without losing or repeating a file. Times and "
+                                    "conditions come from a scenario.json in DIR where it lists the file, else "
+                                    "the file's modification time and --condition.")
+    p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL")
+    p.add_argument("directory", metavar="DIR", help="the folder the measurement files arrive in")
+    p.add_argument("--machine", help="machine id (default: the store's only machine)")
+    p.add_argument("--condition", metavar="NAME=VALUE", action="append", default=[],
+                   help="operating condition of files the folder's scenario.json does not list (repeatable)")
+    p.add_argument("--interval", type=float, default=2.0, help="seconds between looks at DIR (default 2)")
+    p.add_argument("--settle", type=float, default=1.0,
+                   help="seconds a file's size and time must stay unchanged before it is read (default 1)")
+    p.add_argument("--once", action="store_true", help="ingest what DIR holds now, then stop")
+    p.set_defaults(func=watch)
+
     p = cmds.add_parser("baseline", help="learn the healthy state from recorded measurements",
                         description="Healthy expectation (quadratic in the recorded operating conditions) and "
                                     "scatter of the component factors; restarts the detector.")
@@ -99,8 +119,9 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("--first", type=int, help="use the first N recorded measurements")
     p.add_argument("--since", help="ISO time: from")
     p.add_argument("--until", help="ISO time: to")
-    p.add_argument("--resolution", type=float, default=0.005,
-                   help="smallest relative change treated as real (default 0.005)")
+    p.add_argument("--resolution", type=float,
+                   help="smallest relative change treated as real, e.g. 0.005 (default: derived from the healthy "
+                        "data's own scatter)")
     p.set_defaults(func=baseline)
 
     p = cmds.add_parser("status", help="latest factors, active alarms and worst severity per machine")
@@ -291,12 +312,7 @@ def ingest(args: argparse.Namespace) -> int:
                     raise DataError(msg) from exc
                 exc.add_note(f"cappe monitor ingest stopped at {path}: {what}")
                 raise
-            for alarm in result.alarms:
-                lines.append(f"ALARM {when.isoformat()} {path.name}: {alarm.message}")
-            if result.not_judged:
-                lines.append(f"NOT JUDGED {when.isoformat()} {path.name} (recorded as measurement "
-                             f"{result.measurement_id}): {'; '.join(result.not_judged)}")
-            lines += [f"note {when.isoformat()} {path.name}: {n}" for n in result.notes]
+            lines += _judgement_lines(result, path, when)
         counts = store.counts(machine)
         has_baseline = store.baseline(machine) is not None
     lines += [f"skipped {s['file']}: {s['why']}" for s in skipped]
@@ -315,6 +331,99 @@ def ingest(args: argparse.Namespace) -> int:
     emit(args, {"machine": machine, "measurements": results, "skipped": skipped, "counts": counts},
          "\n".join(lines))
     return 0
+
+
+def _judgement_lines(result: Any, path: Path, when: datetime) -> list[str]:
+    """The lines a person must see about one ingested measurement: its alarms, why it was not judged, notes."""
+    lines = [f"ALARM {when.isoformat()} {path.name}: {alarm.message}" for alarm in result.alarms]
+    if result.not_judged:
+        lines.append(f"NOT JUDGED {when.isoformat()} {path.name} (recorded as measurement "
+                     f"{result.measurement_id}): {'; '.join(result.not_judged)}")
+    lines += [f"note {when.isoformat()} {path.name}: {n}" for n in result.notes]
+    return lines
+
+
+#: File endings ``monitor watch`` reads as measurements.
+_MEASUREMENT_SUFFIXES = (".uff", ".unv", ".csv", ".npz")
+
+
+def watch(args: argparse.Namespace) -> int:
+    import time
+
+    from cappe.io import read_measurements
+    from cappe.monitor import Monitor, MonitorConfig, RecordedFiles, file_digest, read_scenario
+    from cappe.monitor import ingest as run_ingest
+
+    folder = Path(args.directory)
+    if not folder.is_dir():
+        msg = f"{folder}: not a folder"
+        raise UsageError(msg)
+    conditions = number_pairs(args.condition, "--condition")
+    looked: dict[Path, tuple[int, float]] = {}  # size and time at the last look: a file still written changes
+    done: dict[Path, tuple[int, float]] = {}  # files dealt with in this process: their size and time then
+    counts = {"ingested": 0, "skipped": 0, "failed": 0}
+    with _open(args.store) as store:
+        machine = _machine(args, store)
+        monitor = Monitor(MonitorConfig.from_dict(store.machine_config(machine)))
+        print(f"{machine}: watching {folder} (every {args.interval:g} s; Ctrl-C stops)", flush=True)
+        try:
+            while True:
+                known = RecordedFiles(store, machine)  # the store is the memory: a restart starts from it
+                listed: dict[Path, tuple[datetime, dict[str, float]]] = {}
+                manifest = folder / "scenario.json"
+                if manifest.is_file():
+                    try:
+                        _, entries = read_scenario(manifest)
+                        listed = {Path(e["file"]).resolve(): (e["timestamp"], {**e.get("conditions", {}),
+                                                                                 **conditions}) for e in entries}
+                    except DataError as exc:
+                        print(f"error: {exc}; its files are read with their modification times", flush=True)
+                now = time.time()
+                ready = []
+                for path in sorted(p for p in folder.iterdir() if p.suffix.lower() in _MEASUREMENT_SUFFIXES
+                                   and p.is_file()):
+                    try:
+                        stat = path.stat()
+                    except OSError:
+                        continue  # gone since the listing
+                    seen, looked[path] = looked.get(path), (stat.st_size, stat.st_mtime)
+                    if done.get(path) == looked[path]:
+                        continue
+                    if seen != (stat.st_size, stat.st_mtime) and (seen is not None or args.settle > 0):
+                        continue  # new or still changing: look again next time
+                    if now - stat.st_mtime < args.settle:
+                        continue
+                    ready.append((stat.st_mtime, path))
+                for _, path in sorted(ready):
+                    when, conds = listed.get(path.resolve(),
+                                             (datetime.fromtimestamp(path.stat().st_mtime, UTC), conditions))
+                    try:
+                        digest = file_digest(path)
+                        why = known.seen(str(path), digest)
+                        if why is None:
+                            result = run_ingest(store, machine, read_measurements(path), timestamp=when,
+                                                source=str(path), conditions=conds, monitor=monitor, digest=digest)
+                            known.add(result.measurement_id, str(path), digest)
+                            counts["ingested"] += 1
+                            lines = [f"{when.isoformat()} {path.name}: recorded as measurement "
+                                     f"{result.measurement_id}",
+                                     *_judgement_lines(result, path, when)]
+                        else:
+                            counts["skipped"] += 1
+                            lines = [f"skipped {path}: {why}"]
+                    except (DataError, ModelError, OSError) as exc:
+                        counts["failed"] += 1
+                        lines = [f"error: {path}: {' '.join(str(exc).split())}; not retried until the file changes"]
+                    done[path] = looked[path]
+                    print("\n".join(lines), flush=True)
+                if args.once:
+                    break
+                time.sleep(args.interval)
+        except KeyboardInterrupt:
+            pass
+    print(f"{machine}: {counts['ingested']} ingested, {counts['skipped']} skipped (recorded already), "
+          f"{counts['failed']} failed", flush=True)
+    return 1 if counts["failed"] else 0
 
 
 def _recorded(store: Any, machine: str, path: Path, when: datetime, *, failed: bool = False) -> set[int] | None:
@@ -364,13 +473,16 @@ def baseline(args: argparse.Namespace) -> int:
     lines.append(f"  {'component':10s} {'factor':>8s} {'std %':>8s}")
     for name in result.names:
         lines.append(f"  {name:10s} {doc['mean'][name]:8.4f} {100 * doc['std'][name] / doc['mean'][name]:8.4f}")
+    lines.append(f"resolution {100 * result.resolution:.2g} % "
+                 + ("(given)" if args.resolution is not None else "(derived from the healthy data's own scatter)"))
+    lines += [f"left out: {why}" for why in result.left_out]
     doc.pop("frf", None)  # the mean FRF is for the dashboard, not the terminal
     emit(args, doc, "\n".join(lines))
     return 0
 
 
 def _status_of(store: Any, machine: str) -> dict[str, Any]:
-    from cappe.monitor import worst_severity
+    from cappe.monitor import Baseline, MonitorConfig, detectable_change, worst_severity
 
     latest = store.latest_measurement(machine)
     table = store.estimates(machine, path="fast")
@@ -385,9 +497,14 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
                    for r in rows.itertuples()}
     active = store.alarms(machine, unacknowledged=True)
     worst = worst_severity([a.severity for a in active])
+    doc = store.baseline(machine)
+    detectable = None
+    if doc is not None:
+        detectable = detectable_change(MonitorConfig.from_dict(store.machine_config(machine)),
+                                       Baseline.from_dict(doc))
     return {"machine": machine, "measurements": store.counts(machine)["measurements"],
             "latest": None if latest is None else latest.to_dict(), "factors": factors,
-            "baseline": store.baseline(machine) is not None,
+            "baseline": doc is not None, "detectable": detectable,
             "unacknowledged_alarms": [a.to_dict() for a in active], "worst_severity": worst}
 
 
@@ -405,6 +522,14 @@ def status(args: argparse.Namespace) -> int:
             std = f"+- {f['std']:.2g}" if f["std"] is not None else ""
             change = f"  {100 * f['change']:+6.2f} % from healthy" if f.get("change") is not None else ""
             lines.append(f"  {name:10s} {f['value']:.4f} {std:10s}{change}")
+        if d["detectable"]:
+            det = d["detectable"]
+            sizes = ", ".join(f"{name} {100 * v:.2g} %" for name, v in det["change"].items())
+            lines.append(f"  detectable: a change of {sizes} is found after about {det['measurements']:.2g} "
+                         f"measurement(s) ({det['shift']:g} standard deviations of the healthy scatter, resolution "
+                         f"{100 * det['resolution']:.2g} %); smaller changes take longer")
+        if d["latest"] and d["latest"].get("meta", {}).get("not_judged"):
+            lines.append("  latest measurement NOT JUDGED: " + "; ".join(d["latest"]["meta"]["not_judged"]))
     emit(args, {"machines": docs}, "\n".join(lines) if lines else f"{args.store}: no machines")
     return 0
 

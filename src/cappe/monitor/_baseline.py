@@ -6,9 +6,14 @@ healthy measurements as a quadratic polynomial in the recorded operating conditi
 a constant), and keeps the covariance of what is left. A new measurement is then judged by its *deviation*
 from the expectation at its own conditions, so that a warm machine is not taken for a faulty one.
 
-The charts standardize the deviations by ``sqrt(std^2 + resolution^2)``: FRF-based estimates are far more
-precise (1e-5 at 1 % FRF noise) than any model of a real machine is accurate, so the ``resolution`` (default
-0.5 %) sets the smallest change the monitoring treats as real.
+The charts standardize the deviations by ``sqrt(std^2 + resolution^2)``. The ``resolution`` is what the
+scatter ``std`` of single measurements does not show (:func:`derived_resolution`, unless one is given): the
+uncertainty of the learned expectation itself (the regression's largest leverage over the healthy data times the
+scatter), and variation slower than one measurement that the regression did not explain (the excess variance of
+means of :data:`BLOCK` consecutive residuals over ``std^2 / BLOCK``; model error that follows the unrecorded
+part of the temperature, say), which a sequential chart would otherwise add up into false alarms. Both come from
+the baseline's own data, so the smallest detectable change follows the machine's real scatter instead of a fixed
+fraction.
 
 The quadratic is known only over the conditions it was learned from. :meth:`Baseline.judge` tells whether a
 measurement's conditions let it be judged at all: a condition the baseline depends on that the measurement does
@@ -31,7 +36,8 @@ from numpy.typing import ArrayLike, NDArray
 from cappe.exceptions import DataError
 from cappe.systems.frf import FRFData
 
-__all__ = ["BASELINE_FORMAT", "IMPLAUSIBLE", "LEARNED_MARGIN", "Baseline", "learn_baseline"]
+__all__ = ["BASELINE_FORMAT", "BLOCK", "IMPLAUSIBLE", "LEARNED_MARGIN", "Baseline", "derived_resolution",
+           "learn_baseline"]
 
 BASELINE_FORMAT = "cappe.monitor-baseline/1"
 
@@ -42,6 +48,9 @@ LEARNED_MARGIN = 0.25
 
 #: Conditions further than this many half-ranges from the learned centre are implausible for the machine.
 IMPLAUSIBLE = 5.0
+
+#: Consecutive healthy measurements whose mean residual shows variation slower than one measurement.
+BLOCK = 8
 
 
 @dataclass(frozen=True)
@@ -62,7 +71,8 @@ class Baseline:
     covariance : ndarray, shape (n, n)
         Covariance of the healthy deviations.
     resolution : float
-        Smallest relative change treated as real (adds to the charts' standard deviation).
+        Smallest relative change treated as real (adds to the charts' standard deviation; derived from the
+        healthy data unless one was given).
     n_measurements : int
         Healthy measurements learned from.
     measurement_ids : tuple of int
@@ -329,6 +339,44 @@ def _mean_frf(frfs: Sequence[FRFData]) -> dict[str, Any] | None:
             "magnitude": np.abs(H).tolist()}
 
 
+def derived_resolution(residual: ArrayLike, design: ArrayLike) -> float:
+    """The resolution a baseline's own data support (see the module notes).
+
+    Parameters
+    ----------
+    residual : array_like, shape (N, n)
+        Healthy log-factors minus the regression's fit, in time order.
+    design : array_like, shape (N, p)
+        The regression's design matrix.
+
+    Returns
+    -------
+    float
+        The largest over the components of ``sqrt(leverage std^2 + excess)`` (``ln`` units).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> white = 1e-3 * rng.standard_normal((400, 1))
+    >>> round(derived_resolution(white, np.ones((400, 1))) / 1e-3, 2)  # white scatter: only 1 / sqrt(400)
+    0.05
+    >>> slow = white + 2e-3 * np.repeat(rng.standard_normal(50), 8)[:, None]  # a level that wanders
+    >>> 1.5 < derived_resolution(slow, np.ones((400, 1))) / 1e-3 < 2.5
+    True
+    """
+    r = np.asarray(residual, dtype=float)
+    x = np.asarray(design, dtype=float)
+    n_meas, p = x.shape
+    var = np.sum(r**2, axis=0) / max(n_meas - p, 1)
+    leverage = float(np.max(np.sum(x * np.linalg.pinv(x).T, axis=1)))
+    blocks = n_meas // BLOCK
+    excess = np.zeros(r.shape[1])
+    if blocks >= 3:
+        means = r[:blocks * BLOCK].reshape(blocks, BLOCK, -1).mean(axis=1)
+        excess = np.clip(means.var(axis=0, ddof=1) - var / BLOCK, 0.0, None)
+    return float(np.sqrt(np.max(leverage * var + excess)))
+
+
 def learn_baseline(
     log_factors: Array,
     *,
@@ -336,7 +384,7 @@ def learn_baseline(
     conditions: Sequence[Mapping[str, float]] | None = None,
     frfs: Sequence[FRFData] | None = None,
     features: Sequence[Mapping[str, float]] | None = None,
-    resolution: float = 0.005,
+    resolution: float | None = None,
     measurement_ids: Sequence[int] = (),
     preload_map: Mapping[str, Any] | None = None,
     sigma: float | None = None,
@@ -356,8 +404,9 @@ def learn_baseline(
         The healthy FRFs (their mean is kept when they share their lines).
     features : sequence of mapping, optional
         Scalar features of each measurement (NaN = missing).
-    resolution : float
-        See the module notes.
+    resolution : float, optional
+        Smallest relative change treated as real (0.005 = 0.5 %); default: :func:`derived_resolution` of the
+        healthy data (see the module notes).
     measurement_ids : sequence of int
     preload_map : mapping, optional
     sigma : float, optional
@@ -409,6 +458,8 @@ def learn_baseline(
     residual = s - design @ coefficients
     dof = max(n_meas - design.shape[1], 1)
     covariance = residual.T @ residual / dof
+    if resolution is None:
+        resolution = derived_resolution(residual, design)
     feature_stats: dict[str, tuple[float, float]] = {}
     if features:
         for key in sorted({k for f in features for k in f}):

@@ -20,7 +20,9 @@ between measurements (the detector state travels through the store). Per measure
    signature in the factors (:func:`diagnose`).
 6. **Severity.** The diagnosed change is graded. An alarm is raised once per diagnosed fault and again only
    when its grade worsens (a loosening screw goes from conditionally tolerable to intolerable); it clears when
-   the charts of the components involved come back to their healthy state.
+   the charts of the components involved come back to their healthy state. A grade worsens with hysteresis: only
+   when the change is beyond the worse grade's threshold by :data:`ESCALATION_Z` standard uncertainties, so a
+   constant fault near a threshold does not raise "worse" alarms on noise.
 """
 
 from __future__ import annotations
@@ -47,13 +49,16 @@ from cappe.monitor._features import frf_features, modal_features
 from cappe.systems.frf import FRFData
 from cappe.systems.timedata import TimeData
 
-__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles", "file_digest", "ingest",
-           "learn_store_baseline", "register_machine"]
+__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles", "detectable_change", "file_digest",
+           "ingest", "learn_store_baseline", "register_machine"]
 
 Array = NDArray[np.float64]
 
 #: Modes of the frequency-damping map kept with the baseline (thesis Fig. 5.30 shows the first ones).
 MAP_MODES = (1, 2, 3)
+
+#: Standard uncertainties by which a change must pass a worse grade's threshold before the alarm escalates.
+ESCALATION_Z = 3.0
 
 #: Units of the operating conditions cappe knows (an offset in degC is one in K); others are shown without one.
 _CONDITION_UNITS = {"temperature": "K"}
@@ -334,7 +339,7 @@ class Monitor:
         *,
         conditions: Sequence[Mapping[str, float]] | None = None,
         frfs: Sequence[FRFData] | None = None,
-        resolution: float = 0.005,
+        resolution: float | None = None,
         measurement_ids: Sequence[int] = (),
     ) -> Baseline:
         """A :class:`Baseline` from healthy analyses, with the mean FRF and the preload map for the dashboard.
@@ -347,8 +352,9 @@ class Monitor:
             Operating conditions of each measurement (the expectation is quadratic in them).
         frfs : sequence of FRFData, optional
             The measurements' FRFs, for the mean healthy FRF.
-        resolution : float
-            Smallest relative change treated as real (0.005 = 0.5 %).
+        resolution : float, optional
+            Smallest relative change treated as real (0.005 = 0.5 %; default derived from the healthy data,
+            :func:`~cappe.monitor._baseline.derived_resolution`).
         measurement_ids : sequence of int
             Their ids in a history store.
 
@@ -376,7 +382,7 @@ class Monitor:
         features: Sequence[Mapping[str, float]],
         conditions: Sequence[Mapping[str, float]] | None,
         frfs: Sequence[FRFData] | None,
-        resolution: float,
+        resolution: float | None,
         measurement_ids: Sequence[int],
         sigma: float | None,
     ) -> Baseline:
@@ -548,9 +554,13 @@ class Monitor:
             # a change the data cannot attribute is graded as its worst explanation (a preload loss or a sensor)
             grade = worst_severity([diagnosis.severity, *(a["severity"] for a in diagnosis.alternatives)])
             assert grade is not None
+            escalated = name in active
+            if escalated:  # hysteresis: worse only when the change is beyond the threshold, not on noise
+                if hyps[name].unit is None:
+                    grade = hyps[name].thresholds.grade(
+                        _toward_zero(diagnosis.change, ESCALATION_Z * diagnosis.change_std))
             if severity_rank(grade) <= severity_rank(active.get(name)):
                 continue
-            escalated = name in active
             active[name] = grade
             statistic = f"{detector.method}{signal.side}"
             what = "worse" if escalated else "detected"
@@ -561,6 +571,11 @@ class Monitor:
         new_state = {"baseline": baseline.created, "detector": chart_state, "active": active,
                      "count": int(state["count"]) + 1}
         return new_state, deviation, alarms
+
+
+def _toward_zero(value: float, margin: float) -> float:
+    """``value`` moved ``margin`` toward zero (not past it)."""
+    return float(np.sign(value) * max(abs(value) - margin, 0.0))
 
 
 # -- the history store ----------------------------------------------------------------------------------------
@@ -696,6 +711,32 @@ def ingest(
                         not_judged=tuple(not_judged), notes=tuple(judge_notes))
 
 
+def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, Any]:
+    """The change of each component the charts are tuned to, and how soon they find it.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The machine's configuration (detection method, false-alarm rate, shift).
+    baseline : Baseline
+        Its healthy baseline (the charts' standard deviations).
+
+    Returns
+    -------
+    dict
+        ``change``: component -> the relative change of ``shift`` chart standard deviations; ``measurements``:
+        the average number of measurements to find it; ``resolution``: the baseline's resolution; ``shift``.
+    """
+    detector = SequentialDetector(baseline.names, baseline.scale, method=config.detection,
+                                  false_alarm_rate=config.false_alarm_rate, shift=config.shift,
+                                  lam=config.ewma_lambda)
+    design = detector.design()
+    return {"change": {n: float(-np.expm1(-config.shift * s)) for n, s in zip(baseline.names, baseline.scale,
+                                                                            strict=True)},
+            "measurements": float(design["arl_at_shift"]), "resolution": baseline.resolution,
+            "shift": config.shift}
+
+
 def file_digest(path: str | Path) -> str:
     """SHA-256 of a file's bytes (how a re-run ingest recognizes a file it recorded, whatever its name).
 
@@ -794,7 +835,7 @@ def learn_store_baseline(
     first: int | None = None,
     since: datetime | None = None,
     until: datetime | None = None,
-    resolution: float = 0.005,
+    resolution: float | None = None,
     monitor: Monitor | None = None,
 ) -> Baseline:
     """Learn the healthy baseline from recorded measurements (the first ``first``, or those in a time range),
@@ -810,8 +851,9 @@ def learn_store_baseline(
         Use the first ``first`` measurements in the range.
     since, until : datetime, optional
         Time range of the measurements used (default all).
-    resolution : float
-        Smallest relative change treated as real (0.005 = 0.5 %).
+    resolution : float, optional
+        Smallest relative change treated as real (0.005 = 0.5 %; default derived from the healthy data,
+        :func:`~cappe.monitor._baseline.derived_resolution`).
     monitor : Monitor, optional
         The machine's monitor (built from the stored config when not given).
 
