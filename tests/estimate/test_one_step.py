@@ -23,7 +23,7 @@ from cappe.estimate._one_step import (
     random_starts,
 )
 from cappe.estimate._space import ParameterSpace
-from cappe.exceptions import DataError, DataWarning
+from cappe.exceptions import ConvergenceWarning, DataError, DataWarning
 from cappe.identify import estimate_frf, random_noise
 from cappe.io.timedata import TimeData
 from cappe.model import NumericModel
@@ -140,8 +140,10 @@ def test_plain_output_error_without_continuation_is_trapped(two_mass, clean):
     # measured motivation for the continuation: on the same (noise-free, 0.5 s) record and start, plain output
     # error ends in a wrong valley while the continuation finds the truth
     short = TimeData.from_rate(FS, {c: clean.values[i, :500] for i, c in enumerate(clean.channels)})
-    plain = OneStepEstimator(two_mass, NAMES, start=_start(PATTERN_A), continuation=(), delay=False).fit(short)
+    with pytest.warns(ConvergenceWarning, match="failed its residual tests: the residuals correlate with the inputs"):
+        plain = OneStepEstimator(two_mass, NAMES, start=_start(PATTERN_A), continuation=(), delay=False).fit(short)
     assert np.max(np.abs(plain.estimate_.values / P_TRUE - 1)) > 0.1
+    assert not plain.estimate_.success  # the wrong valley says so (issue 21)
     guided = OneStepEstimator(two_mass, NAMES, start=_start(PATTERN_A), delay=False).fit(short)
     np.testing.assert_allclose(guided.estimate_.values, P_TRUE, rtol=1e-6)
 
@@ -159,8 +161,10 @@ def test_delay_of_one_and_a_half_samples_and_offsets_are_recovered(two_mass, rig
     np.testing.assert_allclose([est.diagnostics["offsets"]["value"][c][0] for c in ("d1", "d2")], offsets,
                                rtol=1e-6)
     # ignoring the delay biases the estimates (the data are not those of the undelayed model)
-    plain = OneStepEstimator(two_mass, unknowns, values=TRUTH, start=start, delay=False).fit(data).estimate_
+    with pytest.warns(ConvergenceWarning, match="failed its residual tests"):
+        plain = OneStepEstimator(two_mass, unknowns, values=TRUTH, start=start, delay=False).fit(data).estimate_
     assert np.max(np.abs(plain.values / est.values - 1)) > 1e-3
+    assert plain.diagnostics["fit_test"] == "failed"  # and the residual test says so
 
 
 def test_delay_with_noise_is_within_its_uncertainty(two_mass, rig, excitation):
@@ -191,8 +195,10 @@ def test_record_not_starting_at_rest_needs_the_initial_state(two_mass, clean):
     with_state = OneStepEstimator(two_mass, unknowns, values=TRUTH, start=start, initial_state=True).fit(cut)
     with_state = with_state.estimate_
     np.testing.assert_allclose(with_state.values, [TRUTH[n] for n in unknowns], rtol=1e-6)  # noise-free: exact
-    at_rest = OneStepEstimator(two_mass, unknowns, values=TRUTH, start=start).fit(cut).estimate_
+    with pytest.warns(ConvergenceWarning, match="failed its residual tests"):
+        at_rest = OneStepEstimator(two_mass, unknowns, values=TRUTH, start=start).fit(cut).estimate_
     assert np.max(np.abs(at_rest.values / with_state.values - 1)) > 1e-4  # the start-up transient is misfitted
+    assert not at_rest.success
 
 
 def test_several_records_are_fitted_together(two_mass, rig):

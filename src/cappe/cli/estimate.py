@@ -230,10 +230,15 @@ def _text(result: Any, method: str) -> str:
         rel = f"{100 * s / abs(v):10.3g}" if np.isfinite(s) and v != 0 else "         -"
         lo, hi = result.ci95[k]
         interval = f"[{lo:.5g}, {hi:.5g}]" if np.isfinite(lo) else "not determined"
-        flag = "yes" if result.identifiable[k] else "NO"
+        practical = diagnostics.get("practically_non_identifiable", {})
+        flag = "yes" if result.identifiable[k] else f"NO ({practical[name]})" if name in practical else "NO"
         lines.append(f"  {name:>10s}  {v:13.6g}  {rel}     {interval:>24s}   {flag}")
     if result.combinations:
         lines.append("undetermined combinations (relative changes): " + "; ".join(result.combinations))
+    weakest = diagnostics.get("weakest_direction")
+    if isinstance(weakest, dict):
+        lines.append(f"practically non-identifiable: the data determine the unknowns except along "
+                     f"{weakest['combination']} (relative changes, std {100 * weakest['relative_std']:.3g} %)")
     analysis = diagnostics.get("residual_analysis")
     if isinstance(analysis, dict) and "outputs" in analysis:
         white = analysis.get("white", {})

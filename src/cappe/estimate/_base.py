@@ -21,12 +21,16 @@ from cappe._rng import RandomLike, as_generator
 from cappe._settings import Settings
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import jacobian_uncertainty
+from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty, null_direction_text
 from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "least_squares_fit", "with_residual_tests"]
+__all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "honest_intervals",
+           "least_squares_fit", "with_residual_tests"]
 
+#: Relative standard error above which an unknown is practically non-identifiable (its 95 % interval spans more
+#: than about +-60 % of its value).
+PRACTICAL_RELATIVE_STD = 0.3
 #: Residuals below this RMS (relative to the data's, which the estimators scale to 1) are an exact fit: rounding,
 #: not noise, so there is nothing for a residual test to judge.
 _EXACT_FIT_RMS = 1e-8
@@ -47,11 +51,14 @@ class CostFunction:
         ``residuals(p)`` -> ndarray (n_obs,).
     centre : ndarray, shape (space.n,)
         The optimum found (SI).
+    jacobian : ndarray, shape (n_obs, space.n), optional
+        ``d r / d p`` (SI) at the optimum, as the search last evaluated it.
     """
 
     space: ParameterSpace
     residuals: Residuals
     centre: Array
+    jacobian: Array | None = None
 
 
 @dataclass(frozen=True)
@@ -432,10 +439,73 @@ def least_squares_fit(
     message = str(best.message)
     if at_bound:
         message += f"; estimate at a bound for {at_bound}"
+    unc, practical = honest_intervals(space, unc, at_bound)
+    if practical:
+        diag["practically_non_identifiable"] = practical
+        diag["weakest_direction"] = _weakest_direction(space, unc)
     estimate = ParameterEstimate.from_uncertainty(
         method, unc, cost=float(2 * best.cost), success=success, message=message, diagnostics=diag
     )
-    return Fitted(estimate, CostFunction(space, residuals, p))
+    return Fitted(estimate, CostFunction(space, residuals, p, np.asarray(jac_p, dtype=float)))
+
+
+def honest_intervals(space: ParameterSpace, unc: LocalUncertainty, at_bound: Sequence[str]) -> tuple[
+        LocalUncertainty, dict[str, str]]:
+    """Intervals in the search's coordinates, clipped to the bounds, and practical identifiability.
+
+    For an unknown searched in ``log p`` the 95 % interval is ``p exp(+-t std / p)`` (the Gauss-Newton interval
+    of ``log p``, whose std is ``std / p`` to first order): it never includes zero or a negative value. Every
+    interval is clipped to the unknown's bounds (the truth lies inside them). An unknown whose relative standard
+    error exceeds :data:`PRACTICAL_RELATIVE_STD` or that sits at a bound is *practically* non-identifiable: the
+    data leave it free over a range comparable to its value. It is flagged (``identifiable`` False) with its reason.
+
+    Parameters
+    ----------
+    space : ParameterSpace
+        The unknowns (their bounds and which are searched in log).
+    unc : LocalUncertainty
+        The Gauss-Newton uncertainty at the optimum.
+    at_bound : sequence of str
+        Unknowns at a bound.
+
+    Returns
+    -------
+    LocalUncertainty
+        With the new intervals and flags.
+    dict
+        ``{name: reason}`` of the practically non-identifiable unknowns.
+    """
+    from scipy import stats
+
+    p, std = unc.values, unc.std
+    t = float(stats.t.ppf(0.975, unc.dof))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        rel = np.where(p != 0, std / np.abs(p), np.inf)
+        lo = np.where(space.log, p * np.exp(-t * rel), p - t * std)
+        hi = np.where(space.log, p * np.exp(t * rel), p + t * std)
+    finite = np.isfinite(std)
+    lo = np.where(finite, np.maximum(lo, space.lower), np.nan)
+    hi = np.where(finite, np.minimum(hi, space.upper), np.nan)
+    practical: dict[str, str] = {}
+    for k, name in enumerate(space.names):
+        if not unc.identifiable[k]:
+            continue
+        if name in at_bound:
+            practical[name] = "at a bound"
+        elif finite[k] and rel[k] > PRACTICAL_RELATIVE_STD:
+            practical[name] = f"relative std {100 * rel[k]:.3g} % > {100 * PRACTICAL_RELATIVE_STD:g} %"
+    flags = np.array([bool(f) and n not in practical for n, f in zip(space.names, unc.identifiable, strict=True)])
+    return replace(unc, ci95=np.column_stack([lo, hi]), identifiable=flags), practical
+
+
+def _weakest_direction(space: ParameterSpace, unc: LocalUncertainty) -> dict[str, Any]:
+    """The least determined combination of relative changes (largest eigenvalue of the relative covariance)."""
+    scale = np.where(unc.values != 0, np.abs(unc.values), 1.0)
+    rel_cov = unc.covariance / np.outer(scale, scale)
+    rel_cov = np.where(np.isfinite(rel_cov), rel_cov, 0.0)
+    eigval, eigvec = np.linalg.eigh(rel_cov)
+    return {"combination": null_direction_text(space.names, eigvec[:, -1]),
+            "relative_std": float(np.sqrt(max(eigval[-1], 0.0)))}
 
 
 def with_residual_tests(

@@ -58,9 +58,10 @@ from scipy.optimize import least_squares
 
 from cappe._arguments import positive_number
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, Fitted, least_squares_fit, with_residual_tests
+from cappe.estimate._base import Estimator, Fitted, honest_intervals, least_squares_fit, with_residual_tests
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
+from cappe.estimate._uncertainty import correlated_uncertainty, jacobian_uncertainty, null_direction_text
 from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.model.numeric import ParamsLike
@@ -358,6 +359,39 @@ def _free_response(mu: CArray, cm: CArray, length: int) -> Array:
     return np.concatenate([free.real, -free.imag], axis=2)
 
 
+def _sandwich(result: ParameterEstimate, space: ParameterSpace, jacobian: Array, residuals: Array, n_out: int,
+              records: Sequence[int], analysis: Mapping[str, Any]) -> ParameterEstimate:
+    """The estimate with the Newey-West covariance of time-correlated residuals (:func:`correlated_uncertainty`).
+
+    The bandwidth is twice the lag beyond which every output's residual autocorrelation stays inside its 99 %
+    bound (at least the Newey-West rule ``4 (N / 100)^(2/9)``, at most N / 10 or 500 samples)."""
+    n = min(records)
+    rule = int(np.floor(4 * (sum(records) / 100) ** (2 / 9)))
+    inside = rule
+    if "autocorrelation" in analysis:
+        acf = np.abs(np.asarray(analysis["autocorrelation"], dtype=float))[:, 1:]
+        outside = np.flatnonzero(np.any(acf > float(analysis["auto_bound"]), axis=0))
+        inside = int(outside.max()) + 2 if outside.size else 0
+    lag = int(min(max(rule, 2 * inside), n // 10, 500))
+    base = jacobian_uncertainty(names=space.names, values=result.values, jacobian=jacobian, residuals=residuals)
+    hac = correlated_uncertainty(base, jacobian=jacobian, residuals=residuals, block=n_out, records=records,
+                                 max_lag=lag)
+    at_bound = list(result.diagnostics.get("at_bound", []))
+    hac, practical = honest_intervals(space, hac, at_bound)
+    diagnostics = {k: v for k, v in result.diagnostics.items()
+                   if k not in ("practically_non_identifiable", "weakest_direction")}
+    diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
+                                 "gauss_newton_std": dict(zip(space.names, result.std.tolist(), strict=True))}
+    if practical:
+        diagnostics["practically_non_identifiable"] = practical
+        scale = np.where(hac.values != 0, np.abs(hac.values), 1.0)
+        eigval, eigvec = np.linalg.eigh(np.nan_to_num(hac.covariance / np.outer(scale, scale)))
+        diagnostics["weakest_direction"] = {"combination": null_direction_text(space.names, eigvec[:, -1]),
+                                            "relative_std": float(np.sqrt(max(eigval[-1], 0.0)))}
+    return replace(result, std=hac.std, ci95=hac.ci95, correlation=hac.correlation, identifiable=hac.identifiable,
+                   diagnostics=diagnostics)
+
+
 def _offset_basis(weights: Array, n_out: int) -> Array:
     """Per-output constants (length, n_out, n_out), each sample weighted by ``weights`` (length,)."""
     basis = np.zeros((weights.size, n_out, n_out))
@@ -402,6 +436,10 @@ class OneStepEstimator(Estimator):
         :func:`cappe.systems.time_response` simulates by default), linear, or band-limited (what a DAQ with an
         anti-alias filter records; the final fit is then exact in the frequency domain, the continuation stages
         use the linear input).
+    covariance : {"auto", "gauss-newton", "sandwich"}
+        ``"gauss-newton"``: ``s^2 (J^T J)^-1``, right for white residuals; ``"sandwich"``: the Newey-West covariance
+        of residuals correlated in time (:func:`cappe.estimate._uncertainty.correlated_uncertainty`); ``"auto"``
+        (default): the sandwich where the residuals fail the whiteness test.
 
     Attributes
     ----------
@@ -443,6 +481,7 @@ class OneStepEstimator(Estimator):
         continuation: Sequence[float] = CONTINUATION,
         starts: int = 1,
         intersample: str = "zoh",
+        covariance: str = "auto",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -455,6 +494,7 @@ class OneStepEstimator(Estimator):
         self.continuation = continuation
         self.starts = starts
         self.intersample = intersample
+        self.covariance = covariance
 
     # -- data --------------------------------------------------------------------------------------------------
     def _records(self, model: NumericModel, data: Any) -> tuple[list[str], list[str], float, list[_Record]]:
@@ -507,6 +547,9 @@ class OneStepEstimator(Estimator):
         stages_zeta = [float(z) for z in self.continuation]
         if any(not (np.isfinite(z) and z > 0) for z in stages_zeta):
             msg = f"continuation must list artificial damping ratios > 0; got {list(self.continuation)!r}"
+            raise DataError(msg)
+        if self.covariance not in ("auto", "gauss-newton", "sandwich"):
+            msg = f"covariance must be 'auto', 'gauss-newton' or 'sandwich'; got {self.covariance!r}"
             raise DataError(msg)
         sim = _TimeModel(model, self.position, inputs, outputs, dt, check_intersample(self.intersample))
         full, shift = _delay_space(space, max_delay if self.delay else None)
@@ -587,15 +630,20 @@ class OneStepEstimator(Estimator):
             nuisance["delay"] = {"value": delay * dt, "samples": delay, "std": std}
         if self.offsets:
             nuisance["offsets"] = self._offsets(sim, records, params, delay, outputs, len(theta), result.cost)
-        estimate = _physical(result, space.n, nuisance)
         if np.all(np.isfinite(theta)):
             flat = exact_residuals(theta)
             parts, at = [], 0
             for rec in records:
                 parts.append(flat[at: at + rec.y.size].reshape(rec.y.shape))
                 at += rec.y.size
-            estimate = with_residual_tests(estimate, parts, [rec.u for rec in records], outputs, inputs)
-        return fitted.with_estimate(estimate)
+            result = with_residual_tests(result, parts, [rec.u for rec in records], outputs, inputs)
+            analysis = result.diagnostics.get("residual_analysis", {})
+            coloured = "white" in analysis and not all(analysis["white"].values())
+            if fitted.cost is not None and fitted.cost.jacobian is not None and (
+                    self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
+                result = _sandwich(result, full, fitted.cost.jacobian, flat, len(outputs),
+                                   [rec.u.shape[0] for rec in records], analysis)
+        return fitted.with_estimate(_physical(result, space.n, nuisance))
 
     def _project(self, r: Array, modes: _Modes, sim: _TimeModel, *, free: bool) -> Array:
         """Output error (N, n_out) with the offsets (and the free response) projected out, flattened."""

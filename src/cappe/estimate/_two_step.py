@@ -740,8 +740,8 @@ class TwoStepZPKEstimator(_TwoStep):
 
     Parameters
     ----------
-    model, unknowns, bounds, start, values, rng, pairs, position, identification, arx_order, band, weights, n_starts
-        As for :class:`TwoStepTFEstimator`.
+    model, unknowns, bounds, start, values, rng, pairs, position, identification, arx_order, band, weights, n_starts,
+    intersample
     roots : {"frequency-damping", "complex"}
         Residual form of a paired root (see the module notes).
 

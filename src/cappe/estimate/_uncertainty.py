@@ -18,7 +18,7 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-__all__ = ["LocalUncertainty", "jacobian_uncertainty"]
+__all__ = ["LocalUncertainty", "correlated_uncertainty", "jacobian_uncertainty"]
 
 Array = NDArray[np.float64]
 
@@ -170,3 +170,80 @@ def null_direction_text(names: Sequence[str], direction: Array) -> str:
     v = v / np.linalg.norm(v)
     order = np.argsort(-np.abs(v))
     return " ".join(f"{v[k]:+.2f} {names[k]}" for k in order if abs(v[k]) >= 0.05)
+
+
+def correlated_uncertainty(
+    unc: LocalUncertainty,
+    *,
+    jacobian: ArrayLike,
+    residuals: ArrayLike,
+    block: int,
+    records: Sequence[int],
+    max_lag: int,
+) -> LocalUncertainty:
+    """The same estimate with the covariance of residuals correlated in time (Newey-West sandwich).
+
+    ``cov = P S P`` with ``P = (J^T J)^+`` (on the determined subspace, as in :func:`jacobian_uncertainty`) and
+    ``S = sum_|l|<=L (1 - |l| / (L + 1)) sum_t g_t g_{t-l}^T``, ``g_t = J_t^T r_t`` the contribution of time step
+    ``t`` (``block`` residuals: one per output), summed within each record; scaled by ``n_obs / (n_obs - n_p)``.
+    With white residuals it equals the Gauss-Newton covariance up to sampling noise; with coloured residuals
+    (coloured noise, slight model error) it is the asymptotic covariance of least squares that the Gauss-Newton
+    formula underestimates.
+
+    Parameters
+    ----------
+    unc : LocalUncertainty
+        The Gauss-Newton result at the optimum (:func:`jacobian_uncertainty`).
+    jacobian : array_like, shape (n_obs, n_p)
+        ``d r / d p`` at the optimum (SI), rows ordered time-major: ``block`` rows per time step.
+    residuals : array_like, shape (n_obs,)
+        Residuals at the optimum, in the same order.
+    block : int
+        Residuals per time step (the number of outputs).
+    records : sequence of int
+        Time steps of each record, in order (correlations are not summed across records).
+    max_lag : int
+        Bandwidth ``L`` in time steps (>= 0).
+
+    Returns
+    -------
+    LocalUncertainty
+        With the sandwich covariance, its standard errors, Student-t intervals and correlations.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> x = np.linspace(0, 1, 400)[:, None]
+    >>> r = np.convolve(rng.standard_normal(420), np.ones(20) / 20, mode="valid")[:400]  # strongly coloured
+    >>> base = jacobian_uncertainty(names=["a"], values=[1.0], jacobian=x, residuals=r)
+    >>> hac = correlated_uncertainty(base, jacobian=x, residuals=r, block=1, records=[400], max_lag=40)
+    >>> bool(hac.std[0] > 2 * base.std[0])
+    True
+    """
+    jac = np.atleast_2d(np.asarray(jacobian, dtype=float))
+    r = np.asarray(residuals, dtype=float).ravel()
+    n_obs, n_p = jac.shape
+    s2 = float(r @ r) / unc.dof
+    p_inv = unc.covariance / s2 if s2 > 0 else np.zeros((n_p, n_p))
+    g_all = np.einsum("tbp,tb->tp", jac.reshape(-1, block, n_p), r.reshape(-1, block))
+    meat = np.zeros((n_p, n_p))
+    start = 0
+    for steps in records:
+        g = g_all[start: start + steps]
+        start += steps
+        meat += g.T @ g
+        for lag in range(1, min(int(max_lag), steps - 1) + 1):
+            gamma = g[lag:].T @ g[:-lag]
+            meat += (1.0 - lag / (max_lag + 1.0)) * (gamma + gamma.T)
+    meat *= n_obs / max(n_obs - n_p, 1)
+    cov = p_inv @ meat @ p_inv
+    std = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    std = np.where(unc.identifiable | np.isfinite(unc.std), std, np.nan)
+    t = float(stats.t.ppf(0.975, unc.dof))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        corr = cov / np.outer(std, std)
+    corr = np.where(np.isfinite(unc.correlation), corr, np.nan)
+    np.fill_diagonal(corr, 1.0)
+    ci95 = np.column_stack([unc.values - t * std, unc.values + t * std])
+    return LocalUncertainty(unc.names, unc.values, cov, std, ci95, corr, unc.identifiable, unc.rank,
+                            unc.condition_number, unc.singular_values, unc.combinations, unc.dof)
