@@ -103,7 +103,10 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
     estimator.fit(reference)
     identified = estimator.result_
     write_html_report(args.report, result=identified, truth=truth,
-                      title="uniaxial machine tool: automated identification (ideal case)")
+                      title="uniaxial machine tool: automated identification (ideal case)", model=machine,
+                      run={"command": "cappe demo", "seed": args.seed,
+                           "input files": ["builtin:uniaxial-machine-tool (reference modes simulated at a random "
+                                           "truth within the bounds)"]})
     elapsed = time.perf_counter() - t0
     result = identified.estimate
     errors = result.relative_error(truth)

@@ -157,7 +157,9 @@ def run(args: argparse.Namespace) -> int:
     if args.report:
         from cappe.report.html import write_html_report
 
-        write_html_report(args.report, result=result, truth=truth, title=f"{structure.name}: automated identification")
+        write_html_report(args.report, result=result, truth=truth, title=f"{structure.name}: automated identification",
+                          model=structure, run={"command": "cappe " + " ".join(sys.argv[1:]), "seed": args.seed,
+                                                "input files": [args.model, args.reference]})
         doc["diagnostics"]["report"] = args.report
     text = summary_text(result, truth, structure.name)
     if args.report:

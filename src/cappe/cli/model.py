@@ -74,6 +74,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--sensors", metavar="LIST", help="comma-separated sensor channels or nodes for --modal-out")
     p.add_argument("--all-positions", action="store_true",
                    help="with --modal-out: one set per combination of the model's listed axis positions")
+    p.add_argument("--plot", metavar="FILE.html|FILE.gif",
+                   help="animate a mode shape (the bodies' wireframes over one cycle; .html plays in a browser)")
+    p.add_argument("--mode", type=int, default=1, metavar="N", help="mode animated by --plot (1-based, default 1)")
     p.set_defaults(func=modes)
 
     for name, func, helptext in (
@@ -273,8 +276,25 @@ def modes(args: argparse.Namespace, ctx: ModelContext) -> int:
     lines.extend(notes)
     if args.modal_out:
         lines.append(_write_modal(ctx, args))
+    if args.plot:
+        lines.append(_animate(ctx, args, result))
+        data["plot"] = args.plot
     emit(args, data, "\n".join(lines))
     return 0
+
+
+def _animate(ctx: ModelContext, args: argparse.Namespace, result: Any) -> str:
+    from cappe.report import animate_mode_shape
+
+    if not 1 <= args.mode <= result.n_modes:
+        msg = f"--mode must be between 1 and {result.n_modes} (the model's modes); got {args.mode}"
+        raise UsageError(msg)
+    r = args.mode - 1
+    title = (f"{ctx.structure.name}: mode {args.mode}, {result.frequency[r]:.4g} Hz, damping "
+             f"{100 * result.damping[r]:.3g} % ({args.damping})")
+    animate_mode_shape(args.plot, model=ctx.numeric, mode=result, index=r, params=ctx.values,
+                       position=ctx.position, title=title)
+    return f"wrote {args.plot} (mode {args.mode} animated over one cycle, magnified)"
 
 
 def _fixed(value: float, decimals: int) -> str:

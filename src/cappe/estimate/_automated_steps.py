@@ -31,7 +31,7 @@ from cappe.estimate._automated_result import (
 from cappe.estimate._base import CostFunction, least_squares_fit
 from cappe.estimate._damping_least_squares import DampingLeastSquares, damping_least_squares
 from cappe.estimate._exact_modal import ExactModalProblem
-from cappe.estimate._modal_updating import ModalUpdatingEstimator
+from cappe.estimate._modal_updating import MODAL_VARIANCE_FLOOR, ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._subproblems import SubproblemResult, _alternative_starts, choose_stiffness, solve_subproblem
@@ -321,7 +321,7 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
     diagnostics = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)"}
     start = np.clip(current, space.lower, space.upper)
     fitted = least_squares_fit(setup.method, space, problem.residuals, problem.jacobian, starts=start[None, :],
-                               diagnostics=diagnostics)
+                               diagnostics=diagnostics, variance_floor=MODAL_VARIANCE_FLOOR)
     est = fitted.estimate
     values = np.asarray(est.values, dtype=float)
     return JointRefinement(

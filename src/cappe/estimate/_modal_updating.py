@@ -62,7 +62,7 @@ _MODES = ("exact", "first-order")
 # to about sqrt(eps) (a cost known to eps), so the uncertainty assumes at least that residual level; without it a
 # noise-free fit (residuals ~1e-11 where round-off, not noise, is left) claims intervals of ~1e-13 around an estimate
 # 1e-10 off (measured on the uniaxial machine tool: 21 of 27 intervals missed the truth)
-_VARIANCE_FLOOR = float(np.finfo(float).eps)
+MODAL_VARIANCE_FLOOR = float(np.finfo(float).eps)
 # a first-order bias above this fraction of a standard error is warned about (the 95 % interval then under-covers)
 _BIAS_WARNING = 0.1
 
@@ -356,7 +356,7 @@ class ModalUpdatingEstimator(Estimator):
         sets: tuple[ModalDataSet, ...] = data.sets
         starts = random_starts(space, self.starts, rng)
         fitted = least_squares_fit(self.method, space, problem.residuals, problem.jacobian, starts=starts,
-                                   variance_floor=_VARIANCE_FLOOR)
+                                   variance_floor=MODAL_VARIANCE_FLOOR)
         result = fitted.estimate
         if not np.all(np.isfinite(result.values)):  # every start failed: nothing to pair or compare
             return fitted
@@ -407,7 +407,7 @@ class ModalUpdatingEstimator(Estimator):
         problem = self._exact_problem(model, space, data)
         starts = random_starts(space, self.starts, rng)
         fitted = least_squares_fit(self.method, space, problem.residuals, problem.jacobian, starts=starts,
-                                   variance_floor=_VARIANCE_FLOOR)
+                                   variance_floor=MODAL_VARIANCE_FLOOR)
         result = fitted.estimate
         if not np.all(np.isfinite(result.values)):  # every start failed: nothing to pair
             return fitted

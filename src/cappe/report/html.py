@@ -19,7 +19,7 @@ import numpy as np
 
 from cappe.io.files import write_text
 
-__all__ = ["write_html_report"]
+__all__ = ["in_words", "parameter_legend", "write_html_report"]
 
 _STYLE = """
 body { font-family: system-ui, sans-serif; margin: 2em auto; max-width: 1100px; color: #222; }
@@ -90,22 +90,160 @@ def _label(position: Mapping[str, float] | None) -> str:
     return ", ".join(f"{k} = {v:g}" for k, v in position.items())
 
 
-def _parameters(result: Any, truth: Mapping[str, float] | None) -> str:
-    header = ["parameter", "estimate", "std", "95 % interval", "identifiable"]
+def _interval(lo: float, hi: float, value: float) -> str:
+    """``[lo, hi]`` with enough significant digits that the two ends differ where they do (the width shows)."""
+    if not (np.isfinite(lo) and np.isfinite(hi)):
+        return "not determined"
+    width = abs(hi - lo)
+    scale = max(abs(lo), abs(hi), abs(value))
+    digits = 4 if width == 0 or scale == 0 else int(np.clip(np.ceil(np.log10(scale / width)) + 2, 4, 17))
+    return f"[{lo:.{digits}g}, {hi:.{digits}g}]"
+
+
+def _unit(unit: str) -> str:
+    """A parameter unit as printed (dimensionless for an empty unit or ``1``)."""
+    return "-" if unit in ("", "1") else unit
+
+
+def _parameters(result: Any, truth: Mapping[str, float] | None, units: Mapping[str, str]) -> str:
+    header = ["parameter", "unit", "estimate", "std", "std %", "95 % interval", "identifiable"]
     if truth is not None:
         header += ["truth", "error %"]
     rows = []
     for k, name in enumerate(result.names):
         value = float(result.values[k])
-        lo, hi = result.ci95[k]
-        row = [_e(name), _num(value), _num(result.std[k], ".2g"), f"[{_num(lo)}, {_num(hi)}]",
+        lo, hi = (float(v) for v in result.ci95[k])
+        std = float(result.std[k])
+        rel = 100 * std / abs(value) if value != 0 and np.isfinite(std) else float("nan")
+        row = [_e(name), _e(_unit(units.get(name, ""))), _num(value, ".6g"), _num(std, ".2g"), _num(rel, ".2g"),
+               _e(_interval(lo, hi, value)),
                "yes" if result.identifiable[k] else '<span class="bad">no</span>']
         if truth is not None:
             t = truth.get(name)
             err = 100 * (value / t - 1) if t else float("nan")
-            row += [_num(t), _num(err, "+.3f")]
+            inside = t is not None and lo <= t <= hi
+            row += [_num(t, ".6g"), _num(err, "+.2g") + ("" if inside or t is None else
+                                                         ' <span class="bad">(outside the interval)</span>')]
         rows.append(row)
-    return _table(header, rows)
+    return _table(header, rows, names=1)
+
+
+def parameter_legend(structure: Any, names: Sequence[str]) -> list[tuple[str, str, str, str]]:
+    """What each parameter is, from the model: ``(name, meaning, kind, unit)`` per name.
+
+    The meaning is the parameter's description in the model file, followed by where it enters the model (the
+    element, the property and the direction: ``me1: viscous damping in x``), or the body whose mass or inertia
+    it sets.
+
+    Parameters
+    ----------
+    structure : Structure or NumericModel
+        The model.
+    names : sequence of str
+        The parameters to explain.
+
+    Returns
+    -------
+    list of (str, str, str, str)
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> parameter_legend(load_model("builtin:two-mass-rig"), ["c11"])
+    [('c11', 'thick beam damping; enters beam1: viscous damping in x', 'damping', 'N s/m')]
+    """
+    structure = getattr(structure, "structure", structure)
+    by_name = {p.name: p for p in structure.parameters}
+    uses: dict[str, list[str]] = {n: [] for n in names}
+    for element in structure.elements:
+        for label, mapping in (("stiffness", element.stiffness), ("viscous damping", element.damping),
+                               ("loss factor", element.loss)):
+            for direction, expr in mapping.items():
+                for symbol in getattr(expr, "free_symbols", ()):
+                    if str(symbol) in uses:
+                        uses[str(symbol)].append(f"{element.name}: {label} in {direction}")
+    for body in structure.bodies:
+        for label, expr in (("mass", body.mass), ("inertia", body.inertia)):
+            for symbol in getattr(expr, "free_symbols", ()):
+                if str(symbol) in uses and f"{body.name}: {label}" not in uses[str(symbol)]:
+                    uses[str(symbol)].append(f"{body.name}: {label}")
+    out = []
+    for name in names:
+        parameter = by_name.get(name)
+        if parameter is None:
+            out.append((name, "", "", ""))
+            continue
+        parts = [parameter.description] if parameter.description else []
+        if uses[name]:
+            parts.append("enters " + ", ".join(uses[name]))
+        out.append((name, "; ".join(parts), parameter.kind, _unit(parameter.unit)))
+    return out
+
+
+def _legend(structure: Any, names: Sequence[str]) -> str:
+    rows = [[_e(n), _e(meaning), _e(kind), _e(unit)] for n, meaning, kind, unit in parameter_legend(structure, names)]
+    return ("<h3>What the parameters are</h3>"
+            + _table(["parameter", "meaning (model file) and where it enters the model", "kind", "unit"], rows, 2))
+
+
+#: scipy's termination messages, said in words
+_MESSAGES = (
+    ("`gtol` termination condition", "the cost stopped decreasing: its gradient vanished (a local minimum)"),
+    ("`ftol` termination condition", "the cost stopped decreasing: the last steps changed it by a negligible "
+                                     "relative amount"),
+    ("`xtol` termination condition", "the parameters stopped changing: the last step was negligible"),
+    ("`max_nfev` exceeded", "the search ran out of its evaluation budget before it converged"),
+    ("estimate at a bound for", "an estimate ended at its bound"),
+)
+
+
+def in_words(message: str) -> str:
+    """An optimizer's termination message in words an engineer reads (unknown messages pass through).
+
+    Parameters
+    ----------
+    message : str
+        The estimate's ``message``.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> in_words("`gtol` termination condition is satisfied.")
+    'the cost stopped decreasing: its gradient vanished (a local minimum)'
+    """
+    said = []
+    for part in (p.strip() for p in message.split(";")):
+        if not part:
+            continue
+        for key, words in _MESSAGES:
+            if key in part:
+                rest = part.split(key, 1)[1].strip() if key == "estimate at a bound for" else ""
+                said.append(words + (f" ({rest})" if rest else ""))
+                break
+        else:
+            said.append(part)
+    return "; ".join(said)
+
+
+def _run_info(estimate: Any, identified: Any, run: Mapping[str, Any] | None) -> str:
+    """Version, date, seed, input files and settings: what reproduces the page."""
+    import datetime
+
+    from cappe import __version__
+
+    rows = [["cappe version", _e(__version__)],
+            ["written", _e(datetime.datetime.now(datetime.UTC).strftime("%Y-%m-%d %H:%M UTC"))],
+            ["method", _e(estimate.method)]]
+    for key, value in (run or {}).items():
+        rows.append([_e(key), _e(value if not isinstance(value, list | tuple) else ", ".join(map(str, value)))])
+    if identified is not None:
+        for key, value in identified.settings.to_dict().items():
+            shown = ", ".join(map(str, value)) if isinstance(value, list | tuple) else value
+            rows.append([_e(f"setting {key.replace('_', ' ')}"), _e("-" if shown is None else shown)])
+    return "<h2>Run</h2>" + _table(["", "value"], rows)
 
 
 def _histograms(result: Any, truth: Mapping[str, float], groups: Mapping[str, Sequence[str]]) -> str:
@@ -128,23 +266,99 @@ def _histograms(result: Any, truth: Mapping[str, float], groups: Mapping[str, Se
     return _png(fig)
 
 
-def _sensitivity_map(gsa: Any, threshold: float) -> str:
-    """ST of every output (rows: criterion, mode, position) over the parameters, significant cells outlined."""
+def _sensitivity_map(gsa: Any, threshold: float, max_rows: int = 60) -> str:
+    """ST of the outputs (rows: criterion, mode, position) over the parameters, significant cells marked: only the
+    outputs where some parameter reaches ``threshold``, the ``max_rows`` with the largest ST when there are more,
+    so that every row keeps a readable label."""
     plt = _pyplot()
     st = np.clip(np.nan_to_num(np.asarray(gsa.sobol.ST, dtype=float)), 0, 1)
     names = list(gsa.sobol.names)
     outputs = list(gsa.sobol.output_names)
-    height = min(max(3.0, 0.14 * len(outputs) + 1.5), 40.0)
-    fig, ax = plt.subplots(figsize=(max(6.0, 0.3 * len(names) + 3), height))
+    keep = np.flatnonzero(st.max(axis=1) >= threshold)
+    note = f"{keep.size} of {len(outputs)} outputs have a parameter with ST >= {threshold:g}"
+    if keep.size > max_rows:
+        keep = np.sort(keep[np.argsort(-st[keep].max(axis=1), kind="stable")[:max_rows]])
+        note += f"; the {max_rows} with the largest ST are drawn"
+    if keep.size == 0:
+        return f"<p class=note>{_e(note)}: no sensitivity map.</p>"
+    st = st[keep]
+    labels = [outputs[i] for i in keep]
+    fig, ax = plt.subplots(figsize=(max(6.0, 0.35 * len(names) + 3), max(3.0, 0.22 * len(labels) + 2)))
     image = ax.imshow(st, aspect="auto", cmap="viridis", vmin=0, vmax=1, interpolation="nearest")
     rows, cols = np.nonzero(st >= threshold)
-    ax.scatter(cols, rows, s=4, c="w", marker=".")
-    ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=7)
-    step = max(1, len(outputs) // 60)
-    ax.set_yticks(range(0, len(outputs), step), outputs[::step], fontsize=6)
-    fig.colorbar(image, ax=ax, label="total Sobol index ST")
-    ax.set_title(f"sensitivity map (dots: ST >= {threshold:g})", fontsize=10)
-    return _png(fig)
+    ax.scatter(cols, rows, s=6, c="w", marker=".")
+    ax.set_xticks(range(len(names)), names, rotation=60, ha="right", fontsize=8)
+    ax.set_yticks(range(len(labels)), labels, fontsize=8)
+    ax.set_xlabel("parameter")
+    ax.set_ylabel("output (criterion:mode@position)")
+    fig.colorbar(image, ax=ax, label="total Sobol index ST (0-1)", shrink=min(1.0, 12.0 / max(len(labels), 1)))
+    ax.set_title(f"sensitivity map (white dots: ST >= {threshold:g})", fontsize=10)
+    return f"<p class=note>{_e(note)}.</p>" + _png(fig, "sensitivity map")
+
+
+def _sobol_note(gsa: Any) -> str:
+    """What total Sobol indices are, and whether this sample size estimates them well enough to read."""
+    sobol = gsa.sobol
+    st = np.asarray(sobol.ST, dtype=float)
+    conf = np.asarray(sobol.ST_conf, dtype=float)
+    text = ("<p class=note>The total Sobol index ST of a parameter is the share of an output's variance, over the "
+            "parameter bounds, that involves that parameter alone or in interaction with others (dimensionless, "
+            "between 0 and 1; the first-order index S1 counts it alone). An output whose ST is near 0 for a "
+            "parameter carries no information on it. Estimated from "
+            f"N = {sobol.n} base samples ({sobol.n * (len(sobol.names) + 2)} model runs); whiskers: "
+            f"{100 * sobol.conf_level:g} % bootstrap intervals.</p>")
+    outside = int(np.sum((st > 1.05) | (st < -0.05)))
+    wide = int(np.sum(conf > 0.1))
+    if outside or wide:
+        text += (f"<p class=bad>Too noisy to read at N = {sobol.n}: {outside} of {st.size} ST estimates lie "
+                 f"outside [0, 1] (from {np.nanmin(st):.2g} to {np.nanmax(st):.2g}) and {wide} have "
+                 "intervals wider than +-0.1. Only a parameter's membership of the significant set is used here; "
+                 "for the values themselves run a larger sample (the error falls as 1/sqrt(N)).</p>")
+    return text
+
+
+def _mode_table(results: Sequence[Any]) -> str:
+    """Per position and reference mode: frequencies measured and model, their difference, NDD and MACXP."""
+    rows = []
+    for res in results:
+        for r, f_ref in enumerate(res.reference_frequency):
+            f_model = float(res.model_frequency[r])
+            rows.append([_e(_label(res.position)), str(r + 1), str(int(res.model_mode[r]) + 1), _num(f_ref, ".5g"),
+                         _num(f_model, ".5g"), _num(100 * (f_model / f_ref - 1), "+.3g"),
+                         _num(100 * float(res.ndd[r]), ".3g"), _num(100 * float(res.macxp[r]), ".2f")])
+    return ("<h3>Modes</h3><p class=note>Reference (measured or simulated) against the identified model, mode by "
+            "mode: natural frequencies in Hz and their difference; NDD, the natural damping difference "
+            "|zeta_model - zeta_ref| / zeta_ref; MACXP, shape agreement weighted by pole proximity (paper eq. 4; "
+            "100 % = identical mode).</p>"
+            + _table(["position (m)", "mode", "model mode", "f reference (Hz)", "f model (Hz)", "difference %",
+                      "NDD %", "MACXP %"], rows))
+
+
+#: a MACXP below this is explained on the page
+_GOOD_MACXP = 0.99
+
+
+def _worst_macxp(results: Sequence[Any], estimate: Any) -> str:
+    """Which mode has the worst MACXP, and what makes it low, next to the parameter uncertainty."""
+    worst = None
+    for res in results:
+        for r, value in enumerate(res.macxp):
+            if np.isfinite(value) and (worst is None or value < worst[0]):
+                worst = (float(value), res, r)
+    if worst is None or worst[0] >= _GOOD_MACXP:
+        return ""
+    value, res, r = worst
+    nfd = 100 * (float(res.model_frequency[r]) / float(res.reference_frequency[r]) - 1)
+    ndd = 100 * float(res.ndd[r])
+    std = np.asarray(estimate.std, dtype=float) / np.abs(np.asarray(estimate.values, dtype=float))
+    largest = float(np.nanmax(100 * std)) if np.any(np.isfinite(std)) else float("nan")
+    cause = ("the damping differs more than the frequency: MACXP weights shape agreement by pole proximity, and "
+             "the pole of a lightly damped mode moves mostly with its damping" if abs(ndd) > abs(nfd) else
+             "the frequencies differ: MACXP weights shape agreement by pole proximity")
+    return (f"<p>Worst MACXP: {100 * value:.2f} % for reference mode {r + 1} at {_e(_label(res.position))} (model "
+            f"mode {int(res.model_mode[r]) + 1}; frequency {nfd:+.3f} %, NDD {ndd:.3g} %): {cause}. The largest "
+            f"parameter standard error is {largest:.3g} %; a damping parameter that the modes determine poorly "
+            "leaves such a mode's MACXP low while the stiffnesses agree.</p>")
 
 
 def _sobol_bars(gsa: Any, top: int, max_panels: int) -> str:
@@ -159,7 +373,9 @@ def _sobol_bars(gsa: Any, top: int, max_panels: int) -> str:
     with tempfile.TemporaryDirectory() as folder:
         target = Path(folder) / "sobol.png"
         sobol_plot(gsa.sobol, target, outputs=chosen, top=top)
-        return _img(target.read_bytes(), "Sobol indices")
+        return ("<p class=note>Bars per output (the outputs with the largest single ST): blue the first-order "
+                "index S1, orange the total index ST (dimensionless), black whiskers their bootstrap intervals."
+                "</p>" + _img(target.read_bytes(), "Sobol indices"))
 
 
 def _statistics(label: str, stats: Mapping[str, Mapping[str, float]]) -> str:
@@ -219,6 +435,8 @@ def write_html_report(
     title: str | None = None,
     top: int = 10,
     max_sobol_panels: int = 6,
+    model: Any | None = None,
+    run: Mapping[str, Any] | None = None,
 ) -> Path:
     """Write a self-contained HTML report of an identification (atomically).
 
@@ -242,6 +460,12 @@ def write_html_report(
         Page title.
     top, max_sobol_panels : int
         Parameters per Sobol' bar chart and number of charts.
+    model : Structure or NumericModel, optional
+        The identified model: units of the parameters and a legend saying what each one is (its description
+        and the element, property and direction it enters).
+    run : mapping, optional
+        What reproduces the run, shown with the cappe version, the date and the identification settings: e.g.
+        ``{"command": ..., "seed": 0, "input files": [...]}``.
 
     Returns
     -------
@@ -255,7 +479,7 @@ def write_html_report(
     ...                         np.eye(1), np.array([True]))
     >>> with tempfile.TemporaryDirectory() as d:
     ...     text = write_html_report(Path(d) / "r.html", result=res, truth={"k": 2.0}).read_text()
-    >>> "<table>" in text and "+0.000" in text
+    >>> "<table>" in text and "[1.8, 2.2]" in text
     True
     """
     from cappe.estimate import AutomatedResult, IdentificationValidation
@@ -270,19 +494,31 @@ def write_html_report(
         validation = IdentificationValidation(validation.get("validation"),
                                               tuple(validation.get("identification") or ()), permuted,
                                               tuple({} for _ in permuted)) if validation else None
+    structure = getattr(model, "structure", model)
+    units = {p.name: p.unit for p in structure.parameters} if structure is not None else {}
     parts = [f"<h1>{_e(title or 'cappe identification report')}</h1>",
-             f"<p>method <b>{_e(estimate.method)}</b>, cost {_num(estimate.cost)}, "
-             f"{'converged' if estimate.success else '<span class=bad>not converged</span>'}"
-             f"{': ' + _e(estimate.message) if estimate.message else ''}</p>"]
+             f"<p>method <b>{_e(estimate.method)}</b>: "
+             f"{'converged' if estimate.success else '<span class=bad>did not converge</span>'}"
+             f"{' - ' + _e(in_words(estimate.message)) if estimate.message else ''}. Final cost "
+             f"{_num(estimate.cost)} (sum of squared weighted relative residuals, dimensionless).</p>"]
     if identified is not None and identified.identification_positions:
         parts.append(f"<p>identification positions: "
                      f"{_e('; '.join(_label(p) for p in identified.identification_positions))}; "
                      f"validation position: {_e(_label(identified.validation_position))}</p>")
-    parts.append("<h2>Parameters</h2>" + _parameters(estimate, truth))
+    parts.append(_run_info(estimate, identified, run))
+    parts.append("<h2>Parameters</h2><p class=note>Estimates in SI units with their standard error and 95 % "
+                 "interval (local, from the Jacobian at the optimum); identifiable: the data determine the "
+                 "parameter (not part of an undetermined combination).</p>" + _parameters(estimate, truth, units))
+    if structure is not None:
+        parts.append(_legend(structure, estimate.names))
+    elif any("_" in n for n in estimate.names):
+        parts.append("<p class=note>Pass the model to name what each parameter is (units and legend).</p>")
     if identified is not None:
         parts.append("<h2>Stages</h2>")
-        parts.append(_table(["stage", "cost"], [[_e(k), _num(v)] for k, v in identified.costs.items()]))
-        parts.append(_table(["stage", "seconds"], [[_e(k), _num(v, ".3g")] for k, v in identified.timings.items()]))
+        parts.append(_table(["stage", "cost (dimensionless)"],
+                            [[_e(k.replace("_", " ")), _num(v)] for k, v in identified.costs.items()]))
+        parts.append(_table(["stage", "time (s)"],
+                            [[_e(k.replace("_", " ")), _num(v, ".3g")] for k, v in identified.timings.items()]))
     if truth is not None:
         groups = {"all": list(estimate.names)}
         if identified is not None and (identified.stiffness_unknowns or identified.damping_unknowns):
@@ -292,27 +528,29 @@ def write_html_report(
             parts.append("<h2>Deviation from the truth</h2>" + figure)
     if gsa is not None:
         parts.append("<h2>Global sensitivity</h2>")
+        parts.append(_sobol_note(gsa))
         parts.append(_sensitivity_map(gsa, identified.gsa.threshold if identified is not None else 0.01))
         parts.append(_sobol_bars(gsa, top, max_sobol_panels))
     if identified is not None and identified.stiffness.selection:
-        parts.append(_selection(identified.stiffness.selection))
+        parts.append(_selection(identified.stiffness.selection, units))
     if validation is not None:
-        parts += _validation(validation)
+        parts += _validation(validation, estimate)
     page = (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{_e(title or 'cappe report')}</title>"
             f"<style>{_STYLE}</style></head><body>{''.join(parts)}</body></html>\n")
     return write_text(path, page)
 
 
-def _selection(selection: Mapping[str, Any]) -> str:
+def _selection(selection: Mapping[str, Any], units: Mapping[str, str]) -> str:
     """The paper's subproblem selection: per modal unknown, the least-spread subproblem's median."""
-    rows = [[_e(n), _num(s.value), _num(100 * s.spread, ".3g"), str(s.mode), _e(_label(s.position)),
+    rows = [[_e(n), _num(s.value), _e(_unit(units.get(n, ""))), _num(100 * s.spread, ".3g"), str(s.mode),
+             _e(_label(s.position)),
              str(s.searched_in)] for n, s in selection.items()]
     return ("<h2>Stiffness subproblems</h2><p class=note>For each parameter the mode-position subproblem "
             "with the least spread of its optimum over the runs (paper section 2.3.2).</p>"
-            + _table(["parameter", "median", "spread %", "mode", "position", "subproblems"], rows))
+            + _table(["parameter", "median", "unit", "spread %", "mode", "position (m)", "subproblems"], rows))
 
 
-def _validation(validation: Any) -> list[str]:
+def _validation(validation: Any, estimate: Any) -> list[str]:
     """Statistics at the held-out and identification positions, the permuted-damping comparison, the FRF overlay
     and the MACXP matrices."""
     parts = ["<h2>Validation</h2>"]
@@ -332,6 +570,8 @@ def _validation(validation: Any) -> list[str]:
     if target is not None:
         parts.append("<h3>FRF overlay</h3>" + _overlay(target, permuted))
     shown = ([held] if held is not None else []) + ident
+    if shown:
+        parts.append(_mode_table(shown) + _worst_macxp(shown, estimate))
     if shown:
         parts.append("<h3>MACXP matrices</h3>" + _macxp_matrices(shown))
     return parts
