@@ -529,7 +529,7 @@ def test_modal_read_errors(tmp_path):
     pyuff.UFF(str(response)).write_sets(
         {"type": 55, "analysis_type": 5, "data_ch": 2, "spec_data_type": 8, "load_case": 1, "freq_step_n": 1,
          "freq": 20.0, "node_nums": np.array([1]), "r1": [1.0], "r2": [0.0], "r3": [0.0]}, mode="add")
-    with pytest.raises(DataError, match=r"fr\.uff holds no mode shapes \(UFF 55 analysis type 2, 3 or 7\); found UFF 55 \(UFF 55 analysis types \[5\]\)"):
+    with pytest.raises(DataError, match=r"fr\.uff holds no mode shapes \(UFF 55 analysis type 2, 3 or 7, or UFF 2414 normal modes at nodes\); found UFF 55 \(UFF 55/2414 analysis types \[5\]\)"):
         read_uff_modal(response)
     negative = _foreign_55(tmp_path / "neg.uff", [((10.0, -0.01), r)], [1, 2], analysis_type=2)
     with pytest.raises(DataError, match=r"dataset #2 of .*neg\.uff: mode 1 of load case 1 must have a frequency > 0 Hz and a damping ratio in \[0, 1\); got 10 Hz and -0.01"):
@@ -795,3 +795,36 @@ def test_foreign_time_channels_named_in_id_line_1(tmp_path):
     recs[1]["id1"] = "Mic 01"
     recs[0]["id1"] = "Mic 00"
     assert read_uff_time_data(_foreign_58(tmp_path / "same.uff", recs)).channels == ("1", "2", "3")
+
+
+def _uff_2414_normal_modes(path, freq, zeta, shapes):
+    """UFF 2414 normal modes at nodes written by hand from the format's record layout (as FE solvers write them):
+    records 1-13 per mode, then node number / six values per node (real, 6E13.5)."""
+    e = lambda *v: "".join(f"{x:13.5E}" for x in v)  # noqa: E731
+    lines = []
+    for r, (f, z) in enumerate(zip(freq, zeta, strict=True)):
+        lines += ["    -1", "  2414", f"{r + 1:10d}", f"Mode {r + 1}", f"{1:10d}"] + ["NONE"] * 5
+        lines += ["".join(f"{v:10d}" for v in (1, 2, 3, 8, 4, 6)),
+                  "".join(f"{v:10d}" for v in (1, 0, 1, 0, 1, r + 1, 0, 0)), f"{0:10d}{0:10d}",
+                  e(0.0, f, (2 * np.pi * f) ** 2, 1.0, z, 0.0), e(0.0, 0.0, 0.0, 0.0, 0.0, 0.0)]
+        for node, value in enumerate(shapes[:, r], start=1):
+            lines += [f"{node:10d}", e(value, 0.0, 0.0, 0.0, 0.0, 0.0)]
+        lines.append("    -1")
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def test_fe_normal_modes_from_uff_2414(tmp_path):
+    # an FE model's modes (the 3-DOF chain solved with scipy.linalg.eigh) as UFF 2414: read as modal data to
+    # compare with measured modes; frequencies and shapes to the 6 digits of E13.5
+    import scipy.linalg as sla
+
+    m = np.diag([2.0, 1.0, 1.5])
+    k = 1e5 * np.array([[3.0, -1.0, 0.0], [-1.0, 2.0, -1.0], [0.0, -1.0, 1.5]])
+    w2, phi = sla.eigh(k, m)
+    freq = np.sqrt(w2) / (2 * np.pi)
+    data = read_uff_modal(_uff_2414_normal_modes(tmp_path / "fe.unv", freq, [0.01, 0.02, 0.0], phi))
+    assert data.sensors == ("1:x", "2:x", "3:x")
+    np.testing.assert_allclose(data.sets[0].frequency, freq, rtol=1e-5)
+    np.testing.assert_allclose(data.sets[0].damping, [0.01, 0.02, 0.0], atol=1e-7)
+    np.testing.assert_allclose(data.sets[0].shapes.real, phi, rtol=1e-5, atol=1e-6)

@@ -639,7 +639,8 @@ def extract_modes(
     LSFD; the root-mean-square deviation of the replicates from the estimate is the standard deviation (it holds the
     estimator's bias under this noise as well as its spread). Model error left in the residual counts as noise
     (the estimate errs on the wide side). A mode that the replicates find in fewer than half of them is not
-    determined by the data: it is named in ``result.warnings``.
+    determined by the data, nor is a damping ratio whose standard deviation exceeds half its value: both are named
+    in ``result.warnings``.
 
     Parameters
     ----------
@@ -739,6 +740,11 @@ def extract_modes(
         f"replicates of the data's own noise: the data do not determine it (a spurious or weakly excited mode?)"
         for r in range(fit.n_modes)
         if found[r] < n_bootstrap / 2
+    ) + tuple(
+        f"mode {r + 1} at {fit.frequency[r]:.4g} Hz: its damping ratio {100 * fit.damping[r]:.3g} % has a standard "
+        f"deviation of {100 * damp_std[r]:.2g} %: the data hardly determine it"
+        for r in range(fit.n_modes)
+        if found[r] >= n_bootstrap / 2 and np.isfinite(damp_std[r]) and damp_std[r] > 0.5 * fit.damping[r]
     )
     return replace(
         result, frequency_std=freq_std, damping_std=damp_std, shape_std=shape_std, found=found,

@@ -115,7 +115,8 @@ FUNCTION_TYPES = {
 TIME, FRF, COHERENCE, MULTIPLE_COHERENCE = 1, 4, 6, 26
 SUPPORTED = (
     "UFF 58 function type 1 (time response), 4 (FRF) with optional 6/26 (coherence); "
-    "UFF 55 analysis type 2, 3 or 7 (modes) with UFF 15/2411 nodes and UFF 2467 groups"
+    "UFF 55 analysis type 2, 3 or 7 (modes), or UFF 2414 normal modes at nodes (FE results), with UFF 15/2411 "
+    "nodes and UFF 2467 groups"
 )
 
 _DIRECTIONS = {"x": 1, "y": 2, "z": 3, "rx": 4, "ry": 5, "rz": 6}
@@ -1212,7 +1213,9 @@ def _mode_values(p: Path, k: int, dset: Mapping[str, Any]) -> tuple[float, float
 
 
 def read_uff_modal(path: str | Path) -> ModalData:
-    """Read the UFF 55 mode datasets of a file (analysis type 2 normal or 3/7 complex modes) as ModalData.
+    """Read the UFF 55 mode datasets of a file (analysis type 2 normal or 3/7 complex modes) as ModalData; UFF 2414
+    normal modes at nodes (an FE solver's results: frequency and viscous damping ratio of record 12, node values of
+    records 14/15) are read the same way as one set, for comparison with measured modes.
 
     Files written by :func:`write_uff_modal` come back with their sensors, positions, frequencies and damping
     exactly and shapes to 6 significant digits. For other files, each load case becomes a set (position ``{}``),
@@ -1245,16 +1248,24 @@ def read_uff_modal(path: str | Path) -> ModalData:
     modes = []
     other = []
     for k, t in enumerate(types):
-        if t != 55:
+        if t not in (55, 2414):
             continue
         dset = _read_set(p, uff, k, t)
-        if int(dset.get("analysis_type", 0)) in (2, 3, 7):
+        if t == 2414:
+            if int(dset.get("analysis_type", 0)) == 2 and int(dset.get("dataset_location", 0)) == 1:
+                modes.append((k, _normal_mode_2414(p, k, dset)))
+            else:
+                other.append(int(dset.get("analysis_type", 0)))
+        elif int(dset.get("analysis_type", 0)) in (2, 3, 7):
             modes.append((k, dset))
         else:
             other.append(int(dset.get("analysis_type", 0)))
     if not modes:
-        found = _found(p, uff, types) + (f" (UFF 55 analysis types {sorted(set(other))})" if other else "")
-        msg = f"{p} holds no mode shapes (UFF 55 analysis type 2, 3 or 7); found {found}; supported: {SUPPORTED}"
+        found = _found(p, uff, types) + (f" (UFF 55/2414 analysis types {sorted(set(other))})" if other else "")
+        msg = (
+            f"{p} holds no mode shapes (UFF 55 analysis type 2, 3 or 7, or UFF 2414 normal modes at nodes); found "
+            f"{found}; supported: {SUPPORTED}"
+        )
         raise DataError(msg)
     names, sensor_groups = _groups(p, uff, types)
     cappe = bool(sensor_groups) and all(_cappe_kind(d) == "modal" for _, d in modes)
@@ -1310,6 +1321,34 @@ def read_uff_modal(path: str | Path) -> ModalData:
         entry["shape_im"].append(shape.imag.tolist())
     document = {"format": MODAL_FORMAT, "sensors": sensors, "sets": list(sets.values())}
     return modal_data_from_mapping(document, str(p))
+
+
+def _normal_mode_2414(p: Path, k: int, dset: Mapping[str, Any]) -> dict[str, Any]:
+    """A UFF 2414 normal mode (analysis type 2, data at nodes: an FE solver's modes) in the fields of a UFF 55 one.
+
+    UFF 2414 record 10 field 6 is the mode number, record 12 holds time, frequency (Hz), eigenvalue, modal mass,
+    viscous and hysteretic damping ratio; records 14/15 give each node and its values (x, y, z[, rx, ry, rz]).
+    """
+    try:
+        freq = float(dset["record12_field2"])
+        zeta = float(dset.get("record12_field5", 0.0) or 0.0)
+        nodes = np.asarray(dset["node_nums"], dtype=np.int64)
+        values = [np.asarray(v, dtype=float) for v in dset["data_at_node"]]
+    except (KeyError, TypeError, ValueError) as exc:
+        msg = f"dataset #{k + 1} of {p} (UFF 2414 normal mode) lacks its frequency or its values at nodes"
+        raise DataError(msg) from exc
+    sizes = {v.size for v in values}
+    if len(sizes) != 1 or not 1 <= sizes.pop() <= 6 or len(values) != nodes.size:
+        msg = f"dataset #{k + 1} of {p} (UFF 2414 normal mode) must give 1 to 6 values for every node alike"
+        raise DataError(msg)
+    table = np.array(values)  # (n_nodes, n_values)
+    mode: dict[str, Any] = {
+        "analysis_type": 2, "freq": freq, "modal_damp_vis": zeta, "node_nums": nodes,
+        "load_case": 0, "mode_n": dset.get("record10_field6"),  # all modes of the file form one set
+    }
+    for slot in range(table.shape[1]):
+        mode[f"r{slot + 1}"] = table[:, slot]
+    return mode
 
 
 def _columns(p: Path, k: int, dset: Mapping[str, Any]) -> tuple[NDArray[np.int64], NDArray[np.complex128]]:
