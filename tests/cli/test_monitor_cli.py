@@ -10,6 +10,7 @@ import urllib.error
 import urllib.request
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from cappe.cli import main
@@ -405,3 +406,54 @@ def test_watch_reports_a_bad_file_and_goes_on(ingest_dir: Path, capsys) -> None:
     assert re.search(r"error: .*b.csv: .*; not retried until the file changes", out)
     assert "2 ingested, 0 skipped (recorded already), 1 failed" in out
     assert sorted(_sources(ingest_dir / "s.db")) == [str(folder / "a1.csv"), str(folder / "c.csv")]
+
+
+# --------------------------------------------------------------------------------------- third-party UFF 58 files
+
+
+def _third_party_uff(frf, path: Path) -> dict[str, str]:
+    """The FRFs written with pyuff as another program writes them: no cappe ID lines, numbered nodes, some
+    sensors mounted in a negative direction (their data negated); returns the sensor map that undoes it."""
+    import pyuff
+
+    mapping = {}
+    sets = []
+    for o, out in enumerate(frf.output_names):
+        node, direction = 11 + o, (-1) ** o * (1 + o % 3)  # 11:+x, 12:-y, 13:+z, 14:-x ...
+        for i, inp in enumerate(frf.input_names):
+            sets.append({"type": 58, "binary": 0, "func_type": 4, "id1": "Acme DAQ", "id2": "run 7", "id3": "NONE",
+                         "id4": "NONE", "id5": "NONE", "rsp_node": node, "rsp_dir": direction, "ref_node": 1,
+                         "ref_dir": 1 + i, "x": frf.freq, "data": np.sign(direction) * frf.H[o, i],
+                         "abscissa_spacing": 1, "abscissa_spec_data_type": 18, "ordinate_spec_data_type": 12,
+                         "orddenom_spec_data_type": 13})
+            mapping[f"1:+{'xyz'[i]}"] = inp
+        mapping[f"{node}:{'-' if direction < 0 else '+'}{'xyz'[abs(direction) - 1]}"] = out
+    pyuff.UFF(str(path)).write_sets(sets, mode="overwrite")
+    return mapping
+
+
+def test_a_third_party_uff_is_ingested_through_a_sensor_map(monitored: Path, capsys, tmp_path: Path) -> None:
+    """The issue: a UFF 58 without cappe's ID lines failed with "FRF data lack channels"."""
+    import shutil
+
+    from cappe.io import read_measurements
+
+    store = tmp_path / "s.db"
+    shutil.copyfile(monitored / "store.db", store)
+    own = read_measurements(monitored / "fault/m00002.uff")
+    mapping = _third_party_uff(own, tmp_path / "acme.uff")
+    (tmp_path / "map.csv").write_text("channel,sensor\n" + "".join(f"{k},{v}\n" for k, v in mapping.items()))
+    code, _, err = run(capsys, "monitor", "ingest", store, tmp_path / "acme.uff", "--time", "2026-01-08T06:00",
+                       "--condition", "temperature=22")
+    assert code == 1
+    assert "FRF data lack channels" in err  # without the map the channels are the file's node numbers
+    code, out, _ = run(capsys, "monitor", "ingest", store, tmp_path / "acme.uff", "--time", "2026-01-08T06:00",
+                       "--condition", "temperature=22", "--sensor-map", tmp_path / "map.csv", "--json")
+    assert code == 0, out
+    doc = json.loads(out)["measurements"][0]
+    with HistoryStore(store) as history:  # the same factors as cappe's own file of the same FRFs gave
+        table = history.estimates("spindle-01", path="fast")
+        sources = {r.id: r.source for r in history.measurements("spindle-01")}
+    mine = table[table["measurement_id"].map(sources) == str(monitored / "fault/m00002.uff")]
+    for name, value in zip(mine["parameter"], mine["value"], strict=True):
+        assert doc["factors"][name] == pytest.approx(value, rel=1e-6)

@@ -21,6 +21,10 @@ from cappe.exceptions import DataError, ModelError
 __all__ = ["register"]
 
 
+_SENSOR_MAP_HELP = ("CSV file with the columns channel,sensor: the files' channel names (a third-party UFF's "
+                    "'12:+z', '1:-x') to the machine's inputs and outputs; negative directions are sign-flipped")
+
+
 def _store_options(p: argparse.ArgumentParser, *, machine: bool = True) -> None:
     p.add_argument("store", metavar="STORE", help="history store: an SQLite file or a SQLAlchemy URL "
                                                    "(postgresql+psycopg://user@host/db)")
@@ -91,6 +95,7 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("--time", help="ISO time of a single FILE (default: the file's modification time)")
     p.add_argument("--condition", metavar="NAME=VALUE", action="append", default=[],
                    help="operating condition of the measurement, e.g. temperature=24.5 (repeatable)")
+    p.add_argument("--sensor-map", metavar="MAP.csv", help=_SENSOR_MAP_HELP)
     p.set_defaults(func=ingest)
 
     p = cmds.add_parser("watch", help="ingest measurement files as they arrive in a folder",
@@ -110,6 +115,7 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("--settle", type=float, default=1.0,
                    help="seconds a file's size and time must stay unchanged before it is read (default 1)")
     p.add_argument("--once", action="store_true", help="ingest what DIR holds now, then stop")
+    p.add_argument("--sensor-map", metavar="MAP.csv", help=_SENSOR_MAP_HELP)
     p.set_defaults(func=watch)
 
     p = cmds.add_parser("baseline", help="learn the healthy state from recorded measurements",
@@ -247,11 +253,11 @@ def simulate(args: argparse.Namespace) -> int:
 def ingest(args: argparse.Namespace) -> int:
     from tqdm import tqdm
 
-    from cappe.io import read_measurements
     from cappe.monitor import Monitor, MonitorConfig, RecordedFiles, file_digest, read_scenario
     from cappe.monitor import ingest as run_ingest
 
     conditions = number_pairs(args.condition, "--condition")
+    read = _reader(args.sensor_map)
     jobs: list[tuple[Path, datetime, dict[str, float]]] = []
     if args.manifest:
         _, entries = read_scenario(args.manifest)
@@ -293,7 +299,9 @@ def ingest(args: argparse.Namespace) -> int:
                     skipped.append({"file": str(path), "why": why})
                     continue
                 before = _recorded(store, machine, path, when)
-                result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
+                data, notes = read(path)
+                lines += [f"note {path.name}: {n}" for n in notes]
+                result = run_ingest(store, machine, data, timestamp=when, source=str(path),
                                     conditions=conds, monitor=monitor, digest=digest)
                 known.add(result.measurement_id, str(path), digest)
                 results.append({"file": str(path), **result.to_dict()})
@@ -333,6 +341,25 @@ def ingest(args: argparse.Namespace) -> int:
     return 0
 
 
+def _reader(sensor_map: str | None) -> Any:
+    """A function path -> (measurement, notes): read the file, its channels renamed by the sensor map."""
+    from cappe.io import read_measurements
+    from cappe.io.sensor_map import apply_sensor_map, map_time_data, read_sensor_map
+    from cappe.systems.frf import FRFData
+
+    mapping = read_sensor_map(sensor_map) if sensor_map else None
+
+    def read(path: Path) -> tuple[Any, list[str]]:
+        data = read_measurements(path)
+        if mapping is None:
+            return data, []
+        if isinstance(data, FRFData):
+            return apply_sensor_map(data, mapping, sensor_map or "")
+        return map_time_data(data, mapping, sensor_map or "")
+
+    return read
+
+
 def _judgement_lines(result: Any, path: Path, when: datetime) -> list[str]:
     """The lines a person must see about one ingested measurement: its alarms, why it was not judged, notes."""
     lines = [f"ALARM {when.isoformat()} {path.name}: {alarm.message}" for alarm in result.alarms]
@@ -350,7 +377,6 @@ _MEASUREMENT_SUFFIXES = (".uff", ".unv", ".csv", ".npz")
 def watch(args: argparse.Namespace) -> int:
     import time
 
-    from cappe.io import read_measurements
     from cappe.monitor import Monitor, MonitorConfig, RecordedFiles, file_digest, read_scenario
     from cappe.monitor import ingest as run_ingest
 
@@ -359,6 +385,7 @@ def watch(args: argparse.Namespace) -> int:
         msg = f"{folder}: not a folder"
         raise UsageError(msg)
     conditions = number_pairs(args.condition, "--condition")
+    read = _reader(args.sensor_map)
     looked: dict[Path, tuple[int, float]] = {}  # size and time at the last look: a file still written changes
     done: dict[Path, tuple[int, float]] = {}  # files dealt with in this process: their size and time then
     counts = {"ingested": 0, "skipped": 0, "failed": 0}
@@ -401,12 +428,13 @@ def watch(args: argparse.Namespace) -> int:
                         digest = file_digest(path)
                         why = known.seen(str(path), digest)
                         if why is None:
-                            result = run_ingest(store, machine, read_measurements(path), timestamp=when,
-                                                source=str(path), conditions=conds, monitor=monitor, digest=digest)
+                            data, notes = read(path)
+                            result = run_ingest(store, machine, data, timestamp=when, source=str(path),
+                                                conditions=conds, monitor=monitor, digest=digest)
                             known.add(result.measurement_id, str(path), digest)
                             counts["ingested"] += 1
                             lines = [f"{when.isoformat()} {path.name}: recorded as measurement "
-                                     f"{result.measurement_id}",
+                                     f"{result.measurement_id}", *(f"note {path.name}: {n}" for n in notes),
                                      *_judgement_lines(result, path, when)]
                         else:
                             counts["skipped"] += 1
