@@ -4,7 +4,14 @@ VENV := .venv
 BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
-.PHONY: install demo test check lint typecheck bench clean
+# The tests run in parallel, one pytest-xdist worker per core (each worker's BLAS on one thread: tests/conftest.py),
+# each test file on one worker so that a module's fixtures are built once. `make test` leaves out the slow
+# end-to-end cases marked `extended` (a faster test covers each: see the marker's reason); `make test-slow` runs
+# them, `make test-all` everything (CI). `make test TEST_WORKERS=0` runs them in this one process.
+TEST_WORKERS ?= auto
+PYTEST := $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+
+.PHONY: install demo test test-slow test-all check lint typecheck bench clean
 
 install: $(STAMP)
 
@@ -18,7 +25,13 @@ demo: install
 	$(BIN)/cappe demo
 
 test: install
-	$(BIN)/python -m pytest -q
+	$(PYTEST) -m "not extended"
+
+test-slow: install
+	$(PYTEST) -m extended
+
+test-all: install
+	$(PYTEST)
 
 lint: install
 	$(BIN)/ruff check src tests benchmarks

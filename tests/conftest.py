@@ -1,4 +1,4 @@
-"""Shared fixtures."""
+"""Shared fixtures, and one BLAS thread in each pytest-xdist worker."""
 
 from __future__ import annotations
 
@@ -8,6 +8,22 @@ from pathlib import Path
 import pytest
 
 from cappe.model import load_model
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """In a pytest-xdist worker (``make test`` runs one per core), BLAS and OpenMP on one thread.
+
+    The workers already fill the cores; BLAS threads on top of them only oversubscribe (and slow down the many
+    small linear-algebra calls of the tests, as in the commands: see cappe.parallel). The variables reach the
+    libraries loaded later and the subprocesses a test starts; threadpoolctl limits the ones loaded now.
+    """
+    if not os.environ.get("PYTEST_XDIST_WORKER"):
+        return
+    from threadpoolctl import ThreadpoolController
+
+    for name in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS", "OMP_NUM_THREADS"):
+        os.environ[name] = "1"
+    ThreadpoolController().limit(limits=1)  # for the life of the worker
 
 
 @pytest.fixture(scope="session")
