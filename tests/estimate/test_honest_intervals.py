@@ -64,4 +64,8 @@ def test_two_step_at_a_bound_is_not_called_identifiable(two_mass):
     assert not est.identifiable[k]
     bounds = load_model("builtin:two-mass-rig").parameter("m2").bounds
     assert bounds[0] <= est.ci95[k, 0] <= est.ci95[k, 1] <= bounds[1]
-    assert "combination" in est.diagnostics["weakest_direction"]
+    assert "m2" in est.diagnostics["weakest_direction"]["combination"]
+    # and step 1 (an OE model of a held input fitted to a linear one) fails its residual tests: not a success
+    assert not est.success
+    assert est.message.startswith("step 1 (output-error model) the residuals correlate with the inputs")
+    assert any("residuals of d1 correlate with input F1" in w for w in est.diagnostics["warnings"])
