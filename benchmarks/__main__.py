@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from benchmarks import (
     bench_automated,
+    bench_coverage,
     bench_estimate,
     bench_flexible,
     bench_identify,
@@ -27,6 +28,7 @@ def main() -> None:
     bench_sobol.main()
     bench_identify.main()
     bench_estimate.main()
+    bench_coverage.main()
     bench_monitor.main()
     bench_pipeline.main()
     bench_automated.main()

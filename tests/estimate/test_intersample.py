@@ -180,3 +180,20 @@ def test_two_step_arx_route_refuses_a_non_held_input(two_mass):
     data = TimeData.from_rate(FS, {"F1": np.sin(np.arange(800.0)), "d1": np.cos(np.arange(800.0))})
     with pytest.raises(DataError, match="identification 'arx'.*assumes a held input; got intersample 'foh'"):
         _fit(two_mass, "two-step-tf", data, intersample="foh", identification="arx")
+
+
+def test_cli_intersample_reaches_the_estimator_or_is_refused(tmp_path, capsys):
+    from cappe.cli import main
+    from cappe.io import write_time_data
+
+    t = np.arange(400) / FS
+    write_time_data(tmp_path / "r.npz", TimeData.from_rate(FS, {"F1": np.sin(300 * t), "d1": 1e-6 * np.sin(300 * t)}))
+    code = main(["estimate", "builtin:two-mass-rig", "--data", str(tmp_path / "r.npz"), "--method", "ekf",
+                 "--unknowns", "k11", "--intersample", "bl"])
+    assert code == 2
+    assert "--intersample bl does not apply to method 'ekf' on time data (it models a held input, zoh)" in (
+        capsys.readouterr().err)
+    code = main(["simulate", "builtin:two-mass-rig", "--excite", "F1=random", "--fs", "1000", "--duration", "0.5",
+                 "--outputs", "d1", "--intersample", "foh", "--json"])
+    assert code == 0
+    assert '"intersample": "foh"' in capsys.readouterr().out

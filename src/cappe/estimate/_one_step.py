@@ -80,6 +80,9 @@ CArray = NDArray[np.complex128]
 CONTINUATION = (0.3, 0.1, 0.03)
 #: A weighted segment spans this many decay times ``1 / sigma`` (exp(-5) = 0.7 % weight left at its end).
 _SEGMENT_DECAYS = 5.0
+#: Lines the runs test judges: coherence at least this (at lower coherence the log of a noisy FRF is biased, a
+#: systematic error of the residual itself, not of the model).
+_TRUSTED_COHERENCE = 0.9
 #: Largest accepted coherence in the weights gamma^2 / (1 - gamma^2) (caps a weight at 999).
 _MAX_COHERENCE = 0.999
 
@@ -837,6 +840,7 @@ class _FRFProblem:
     jacobian: Callable[[Array], Array]
     info: dict[str, Any]
     pairs: tuple[tuple[str, int], ...] = ()  # ("output/input", lines used) in the residuals' order
+    trusted: NDArray[np.bool_] | None = None  # lines whose residual the runs test judges (coherence >= 0.9)
 
 
 class OneStepFRFEstimator(Estimator):
@@ -956,6 +960,8 @@ class OneStepFRFEstimator(Estimator):
             raise DataError(msg)
         weights = weights / weights[weights > 0].mean()
         h = np.where(valid, h, 1.0)
+        self._trusted = (gamma2 >= _TRUSTED_COHERENCE if self.weighting == "coherence" and data.coherence is not None
+                         else np.ones(h.shape, dtype=bool))
         return inputs, outputs, freq[keep], h, weights
 
     def _problem(self, model: NumericModel, space: ParameterSpace, data: Any) -> _FRFProblem:
@@ -1028,10 +1034,11 @@ class OneStepFRFEstimator(Estimator):
         info: dict[str, Any] = {"inputs": inputs, "outputs": outputs, "lines": int(freq.size),
                                 "band": [float(freq.min()), float(freq.max())], "residual": self.residual,
                                 "weighting": self.weighting if data.coherence is not None else "uniform"}
+        trusted = self._trusted[mask]  # in the residuals' line order
         counts = mask.sum(axis=2)
         pairs = tuple((f"{o}/{i}", int(counts[a, b])) for a, o in enumerate(outputs) for b, i in enumerate(inputs)
                       if counts[a, b])
-        return _FRFProblem(full, shift, residuals, jacobian, info, pairs)
+        return _FRFProblem(full, shift, residuals, jacobian, info, pairs, trusted)
 
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
              rng: np.random.Generator) -> Fitted:
@@ -1051,8 +1058,9 @@ class OneStepFRFEstimator(Estimator):
 
     @staticmethod
     def _runs_test(estimate: ParameterEstimate, problem: _FRFProblem, r: Array) -> ParameterEstimate:
-        """The estimate with a runs test of its residuals along frequency (:func:`cappe.identify.runs_test`): long
-        runs of one sign are a misfit far above the noise, so ``success`` becomes False and the message says so."""
+        """The estimate with a runs test of its residuals along frequency (:func:`cappe.identify.runs_test`) at the
+        lines of coherence >= 0.9 (all lines without coherence): long runs of one sign are a misfit far above the
+        noise, so ``success`` becomes False and the message says so."""
         from cappe.identify._residual_analysis import runs_test
 
         diagnostics = dict(estimate.diagnostics)
@@ -1061,9 +1069,10 @@ class OneStepFRFEstimator(Estimator):
             diagnostics["residual_analysis"] = {"exact_fit": True}
             return replace(estimate, diagnostics=diagnostics)
         series, names, at = [], [], 0
+        trusted = problem.trusted if problem.trusted is not None else np.ones(half, dtype=bool)
         for label, count in problem.pairs:
             for part, offset in (("real", 0), ("imag", half)):
-                series.append(r[offset + at: offset + at + count])
+                series.append(r[offset + at: offset + at + count][trusted[at: at + count]])
                 names.append(f"{label} {'log-magnitude' if problem.info['residual'] == 'log' else 'real'}"
                              if part == "real" else
                              f"{label} {'phase' if problem.info['residual'] == 'log' else 'imag'}")

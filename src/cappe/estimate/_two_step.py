@@ -59,7 +59,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Callable, Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -68,7 +68,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import qmc
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, Fitted, least_squares_fit
+from cappe.estimate._base import Estimator, Fitted, least_squares_fit, with_residual_tests
 from cappe.estimate._space import ParameterSpace
 from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
@@ -424,6 +424,7 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> tuple[list
     inputs = [i for i in model.input_names if i in data.channels]  # every excited input enters each output's model
     n = 2 * model.n_dof
     tfs: dict[str, TransferFunctionModel] = {}
+    errors: dict[str, Any] = {}
     for output in dict.fromkeys(p.output for p in pairs):
         order = next(p.order for p in pairs if p.output == output)
         # a held input reaches a displacement or velocity one sample late; a linear one within the sample
@@ -433,6 +434,8 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> tuple[list
             oe = OE(nb=[nb] * len(inputs), nf=[n] * len(inputs), nk=[nk] * len(inputs)).fit(
                 data, inputs=inputs, output=output
             )
+            y = data.channel(output)
+            errors[output] = oe.residuals(data) / max(float(np.sqrt(np.mean((y - y.mean()) ** 2))), 1e-300)
             # a band-limited input has no finite-order discrete equivalent: its linear interpolation stands in
             hold = "zoh" if est.intersample == "zoh" else "foh"
             for p in pairs:
@@ -445,6 +448,10 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> tuple[list
                 if p.output == output:
                     pruned = prune(arx, input=p.input, n_modes=model.n_dof, keep_real=order > 0, cancel_tol=0.0)
                     tfs[p.label] = pruned.transfer_function
+    # step 1's output errors, for the residual tests of its fit (OE: the simulated output's errors)
+    est._step1_errors = (  # noqa: SLF001
+        (np.column_stack(list(errors.values())), np.column_stack([data.channel(i) for i in inputs]), list(errors),
+         inputs) if errors else None)
     return pairs, [tfs[p.label] for p in pairs], f"{est.identification} (time data)"
 
 
@@ -537,6 +544,7 @@ class _TwoStep(Estimator):
         self, model: NumericModel, space: ParameterSpace, data: Any, rng: np.random.Generator
     ) -> Fitted:
         self._check_settings()
+        self._step1_errors: tuple[Array, Array, list[str], list[str]] | None = None
         pairs, tfs, source = _experimental(self, model, data)
         self.transfer_functions_ = tuple(tfs)
         weights = self._pair_weights(pairs)
@@ -550,10 +558,18 @@ class _TwoStep(Estimator):
             "weights": dict(zip([p.label for p in pairs], weights.tolist(), strict=True)),
             **info,
         }
-        return least_squares_fit(
+        fitted = least_squares_fit(
             self.method, space, residuals, jacobian if engine.analytic else None, starts=starts,
             diagnostics=diagnostics,
         )
+        if self._step1_errors is None:
+            return fitted
+        # step 1 must explain the data: its output errors are tested as MATLAB's resid would test them
+        errors, inputs, out_names, in_names = self._step1_errors
+        estimate = with_residual_tests(fitted.estimate, [errors], [inputs], out_names, in_names)
+        if estimate.diagnostics.get("fit_test") == "failed":
+            estimate = replace(estimate, message="step 1 (output-error model) " + estimate.message)
+        return fitted.with_estimate(estimate)
 
     @abstractmethod
     def _residuals(

@@ -64,7 +64,7 @@ def check_intersample(intersample: str) -> str:
     return intersample
 
 
-def _phi12(x: CArray) -> tuple[CArray, CArray]:
+def _phi12(x: ArrayLike) -> tuple[CArray, CArray]:
     """``phi1(x) = (e^x - 1) / x`` and ``phi2(x) = (e^x - 1 - x) / x^2`` elementwise, without cancellation."""
     x = np.asarray(x, dtype=complex)
     small = np.abs(x) < 0.1
