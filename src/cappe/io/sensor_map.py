@@ -142,8 +142,8 @@ def map_channels(names: Sequence[str], mapping: Mapping[str, str] | None) -> lis
     if mapping is None:
         return [channel_sign(n) for n in names]
     keyed: dict[tuple[str, float], str] = {}
-    for channel, sensor in mapping.items():
-        keyed[channel_sign(channel)] = sensor
+    for channel, mapped in mapping.items():
+        keyed[channel_sign(channel)] = mapped
     out: list[tuple[str | None, float]] = []
     for name in names:
         sensor = mapping.get(name)

@@ -146,7 +146,7 @@ class Diagnosis:
 
 def _words(label: str, change: float, std: float, severity: str, unit: str | None, probability: float) -> str:
     if unit is None:
-        size = f"{100 * change:+.1f} % (+- {100 * std:.1f} %), {severity}"
+        size = f"{100 * change:+.1f} % (+- {100 * std:.2g} %), {severity}"
     else:
         size = f"{change:+.2g}{' ' + unit if unit else ''} (+- {std:.1g}{' ' + unit if unit else ''})"
     return f"{label}: {size}, probability {100 * probability:.0f} %"
