@@ -8,7 +8,20 @@ import sys
 from collections.abc import Sequence
 
 from cappe._version import __version__
-from cappe.cli import demo, estimate, extract_modes, fit, frf, identify, model, monitor, sensitivity, simulate, study
+from cappe.cli import (
+    demo,
+    estimate,
+    extract_modes,
+    fit,
+    frf,
+    identify,
+    model,
+    monitor,
+    plan_test,
+    sensitivity,
+    simulate,
+    study,
+)
 from cappe.cli._common import EXIT_USAGE, run_guarded
 
 __all__ = ["build_parser", "main"]
@@ -31,6 +44,7 @@ def build_parser() -> argparse.ArgumentParser:
     estimate.register(sub)
     study.register(sub)
     identify.register(sub)
+    plan_test.register(sub)
     monitor.register(sub)
     demo.register(sub)
     return parser

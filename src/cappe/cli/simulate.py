@@ -2,7 +2,7 @@
 
 * ``cappe simulate MODEL --excite INPUT=SIGNAL ...``: time data (inputs and responses with seeded noise).
 * ``cappe simulate MODEL [--params truth.json] [--positions all|AXIS=V,...] [--modes N] [--noise-frequency ...]
-  [--noise-damping ...] [--noise-shape ...] [--seed N] -o ref.json [--uff modes.uff] [--frf frf.uff
+  [--noise-damping ...] [--noise-shape ...] [--sensors LIST] [--seed N] -o ref.json [--uff modes.uff] [--frf frf.uff
   --driving-points IN,... --band LO:HI --lines N]``: reference modal data (cappe.modal/1) at the model's sensor
   nodes, the exact modes of the true parameters (nominal values for parameters the file leaves out) tracked
   across axis positions, with seeded noise; optionally as UFF 55 with the sensor nodes' global coordinates at the
@@ -33,6 +33,7 @@ MODAL_OPTIONS = {
     "positions": "--positions", "modes": "--modes", "noise_frequency": "--noise-frequency",
     "noise_damping": "--noise-damping", "noise_shape": "--noise-shape", "uff": "--uff", "frf": "--frf",
     "driving_points": "--driving-points", "frf_outputs": "--frf-outputs", "lines": "--lines",
+    "sensors": "--sensors",
 }
 #: Default number of FRF lines and the default top of the FRF band relative to the highest reference mode.
 DEFAULT_LINES, BAND_MARGIN = 801, 1.25
@@ -78,6 +79,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                             "--position)")
     modal.add_argument("--modes", type=int, metavar="N",
                        help="number of modes: the lowest N at the first position, tracked (default all)")
+    modal.add_argument("--sensors", metavar="LIST",
+                       help="sensor channels NODE:DIR or nodes of the modes, comma-separated (default every channel "
+                            "of the model's sensor nodes; e.g. the sensors of a cappe plan-test plan)")
     modal.add_argument("--noise-frequency", type=float, metavar="REL",
                        help="frequency noise: f * (1 + REL * N(0,1)), e.g. 0.005 (default 0)")
     modal.add_argument("--noise-damping", type=float, metavar="REL",
@@ -299,7 +303,7 @@ def _run_modal(args: argparse.Namespace) -> int:
     positions = _parse_positions(args.positions, ctx)
     levels = {key: getattr(args, f"noise_{key}") or 0.0 for key in ("frequency", "damping", "shape")}
     ref = reference_modes(model, params=ctx.values, positions=positions, n_modes=args.modes,
-                          noise_frequency=levels["frequency"], noise_damping=levels["damping"],
+                          sensors=names(args.sensors), noise_frequency=levels["frequency"], noise_damping=levels["damping"],
                           noise_shape=levels["shape"], rng=args.seed)
     sets = [dict(s.position) for s in ref.sets]
 

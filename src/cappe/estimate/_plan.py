@@ -1,0 +1,503 @@
+"""Test planning: which axis positions and sensor channels make the unknowns identifiable, before the test is run.
+
+The criterion is the Fisher information of the modal data that ``cappe identify`` fits, under the noise model
+that ``cappe simulate`` adds and ``cappe identify --noise-*`` weights by (independent Gaussian errors):
+
+* each frequency ``f (1 + s_f e)``: one observation ``(d f / d theta) / (f s_f)`` per mode and position;
+* each damping ratio ``zeta (1 + s_z e)``: ``(d zeta / d theta) / (zeta s_z)``;
+* each shape, compared as the unit vector ``x = phi_S / |phi_S|`` over the measured channels ``S`` with complex
+  noise of RMS modulus ``s_s max|phi_S|`` per component (its real part has std ``s_s max|x| / sqrt 2``, the
+  divisor of :class:`ExactModalProblem`): ``(I - x x^T) (d phi_S / d theta) / |phi_S| / (s_s max|x| / sqrt 2)``
+  (the projection removes the arbitrary scale, to which the MAC-type shape residual is blind).
+
+``theta = log p`` for every unknown p, so the inverse Fisher matrix's diagonal is the squared relative std. The
+derivatives are the exact first-order ones of :meth:`cappe.modal.ModalEngine.derivatives` (undamped modes and
+energy damping ratios; for light damping they equal the exact complex modes' to first order in the damping).
+A mode enters a plan only where the measured channels see it: where its largest measured component is at least
+``visibility`` times its largest component over all candidate channels (else a test would not find the mode).
+
+Why D-optimality (``log det`` of the Fisher matrix) with greedy selection and exchange: it is invariant to the
+scaling of the unknowns, so stiffnesses, dampings and masses of very different sizes compete fairly; it rewards
+determining every unknown (one undetermined direction costs a factor ``delta`` in the determinant) rather than
+piling information on the best-determined ones, which the trace of the Fisher matrix (T-optimality) rewards; and on the modal
+sensitivities it selects positions and sensors together, which effective independence (a sensor criterion on a
+fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the target, not the mode shapes. A weak
+prior ``delta I`` (relative std 1000, ``delta = 1e-6``) keeps the criterion finite while a plan is still rank
+deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange
+on the discrete candidates) reaches the exhaustive optimum in most practical cases at a tiny fraction of its cost.
+"""
+
+from __future__ import annotations
+
+import itertools
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+from numpy.typing import NDArray
+
+from cappe.estimate._uncertainty import LocalUncertainty, jacobian_uncertainty
+from cappe.exceptions import ModelError
+from cappe.modal import ModalEngine
+from cappe.model.numeric import NumericModel, ParamsLike
+
+__all__ = ["PLAN_FORMAT", "MeasurementPlan", "PlanCandidates", "plan_fisher", "plan_test"]
+
+Array = NDArray[np.float64]
+PLAN_FORMAT = "cappe.plan/1"
+#: Weak prior information on every log-parameter (relative std 1000): keeps log det finite while rank deficient.
+PRIOR = 1e-6
+#: Exchange passes (positions, then sensors) at most.
+MAX_PASSES = 10
+
+
+@dataclass(frozen=True)
+class PlanCandidates:
+    """Modal derivatives at every candidate position, at every candidate sensor channel, for the unknowns.
+
+    Built once by :meth:`from_model`; every plan (a subset of positions and of channels) is evaluated from it.
+
+    Attributes
+    ----------
+    model_name : str
+        The model.
+    unknowns : tuple of str
+        The parameters whose std is planned for.
+    values : ndarray, shape (n_p,)
+        Their values (SI) at which the derivatives are taken.
+    positions : tuple of dict
+        Candidate axis positions (m or rad).
+    sensors : tuple of str
+        Candidate sensor channels ``NODE:DIR``.
+    frequency, damping : ndarray, shape (n_pos, n_modes)
+        Frequencies (Hz) and first-order damping ratios.
+    d_frequency, d_damping : ndarray, shape (n_pos, n_modes, n_p)
+        ``d f / d log p`` and ``d zeta / d log p``.
+    shapes : ndarray, shape (n_pos, n_sensors, n_modes)
+        Real mass-normalized shapes at the channels.
+    d_shapes : ndarray, shape (n_pos, n_sensors, n_modes, n_p)
+        ``d phi / d log p``.
+    noise : (float, float, float)
+        Relative noise of frequencies, damping ratios and shape components.
+    visibility : float
+        A mode enters a plan where its largest measured component is at least this fraction of its largest.
+    """
+
+    model_name: str
+    unknowns: tuple[str, ...]
+    values: Array
+    positions: tuple[dict[str, float], ...]
+    sensors: tuple[str, ...]
+    frequency: Array
+    damping: Array
+    d_frequency: Array
+    d_damping: Array
+    shapes: Array
+    d_shapes: Array
+    noise: tuple[float, float, float]
+    visibility: float
+
+    @classmethod
+    def from_model(
+        cls,
+        model: NumericModel,
+        *,
+        unknowns: Sequence[str] | None = None,
+        params: ParamsLike = None,
+        positions: Sequence[Mapping[str, float]] | None = None,
+        sensors: Sequence[str] | None = None,
+        n_modes: int = 20,
+        noise: Sequence[float] = (0.005, 0.05, 0.02),
+        visibility: float = 0.05,
+    ) -> PlanCandidates:
+        """Derivatives of the lowest ``n_modes`` modes at every candidate position and channel.
+
+        Parameters
+        ----------
+        model : NumericModel
+            The model.
+        unknowns : sequence of str, optional
+            Parameters to plan for (default: those marked ``unknown`` in the model).
+        params : mapping, array or None
+            Parameter values (SI) at which to plan (default nominal).
+        positions : sequence of mapping, optional
+            Candidate axis positions (default: every combination of the model's listed positions).
+        sensors : sequence of str, optional
+            Candidate channels ``NODE:DIR`` or node names (default: every channel of the model's sensor nodes).
+        n_modes : int
+            Modes per position (the lowest), as ``cappe simulate --modes``.
+        noise : (float, float, float)
+            Relative std of frequencies, damping ratios and shape components (as ``cappe simulate --noise-*``).
+        visibility : float
+            Fraction of a mode's largest candidate component its measured channels must reach (0 to 1).
+
+        Returns
+        -------
+        PlanCandidates
+        """
+        structure = model.structure
+        names = [p.name for p in structure.parameters if p.unknown] if unknowns is None else list(unknowns)
+        if not names:
+            msg = f"model '{structure.name}' has no unknowns to plan for; mark some 'unknown: true' or name them"
+            raise ModelError(msg)
+        levels = tuple(float(v) for v in noise)
+        if len(levels) != 3 or not all(np.isfinite(v) and v > 0 for v in levels):
+            msg = f"noise must be three numbers > 0 (frequency, damping, shape); got {tuple(noise)!r}"
+            raise ModelError(msg)
+        if not 0.0 <= visibility < 1.0:
+            msg = f"visibility must be in [0, 1); got {visibility!r}"
+            raise ModelError(msg)
+        if positions is None:
+            axes = structure.axes
+            combos = itertools.product(*[a.positions or (0.0,) for a in axes])
+            positions = [dict(zip([a.name for a in axes], c, strict=True)) for c in combos]
+        resolved = tuple(structure.resolve_position(p) for p in positions)
+        if not resolved:
+            msg = f"no candidate positions for model '{structure.name}'"
+            raise ModelError(msg)
+        if sensors is None and not structure.sensors:
+            msg = f"model '{structure.name}' has no sensor nodes to plan with; add a 'sensors:' list or name channels"
+            raise ModelError(msg)
+        if not 1 <= n_modes <= model.n_dof:
+            msg = f"n_modes must be from 1 to {model.n_dof} for model '{structure.name}'; got {n_modes}"
+            raise ModelError(msg)
+        engine = ModalEngine(model, sensors=None if sensors is None else list(sensors), n_modes=n_modes)
+        derivs = [engine.derivatives(params, p, parameters=names) for p in resolved]
+        rel = derivs[0].parameters  # d/d log p = p d/dp
+        if np.any(rel <= 0):
+            bad = [n for n, v in zip(names, rel, strict=True) if v <= 0]
+            msg = f"unknowns must be positive to plan in relative terms; {bad} are not"
+            raise ModelError(msg)
+        return cls(
+            model_name=structure.name,
+            unknowns=tuple(names),
+            values=rel,
+            positions=resolved,
+            sensors=tuple(engine.sensors),
+            frequency=np.array([d.frequency for d in derivs]),
+            damping=np.array([d.damping for d in derivs]),
+            d_frequency=np.array([d.d_frequency * rel for d in derivs]),
+            d_damping=np.array([d.d_damping * rel for d in derivs]),
+            shapes=np.array([d.shapes for d in derivs]),
+            d_shapes=np.array([d.d_shapes * rel for d in derivs]),
+            noise=(levels[0], levels[1], levels[2]),
+            visibility=float(visibility),
+        )
+
+    def jacobian(self, positions: Sequence[int], sensors: Sequence[int]) -> Array:
+        """Noise-normalized sensitivities (n_obs, n_p) of a plan's observations to the log-unknowns.
+
+        Parameters
+        ----------
+        positions : sequence of int
+            Indices into :attr:`positions`.
+        sensors : sequence of int
+            Indices into :attr:`sensors`.
+
+        Returns
+        -------
+        ndarray, shape (n_obs, n_p)
+            One row per frequency, damping ratio and shape component the plan measures.
+        """
+        s_f, s_z, s_s = self.noise
+        chans = np.asarray(sensors, dtype=np.intp)
+        rows: list[Array] = []
+        for j in positions:
+            phi = self.shapes[j][chans]  # (n_s, m)
+            top = np.max(np.abs(self.shapes[j]), axis=0)
+            seen = (np.max(np.abs(phi), axis=0) >= self.visibility * top) & (top > 0)
+            rows.append(self.d_frequency[j, seen] / (self.frequency[j, seen] * s_f)[:, None])
+            damped = seen & (self.damping[j] > 0)
+            rows.append(self.d_damping[j, damped] / (self.damping[j, damped] * s_z)[:, None])
+            norm = np.linalg.norm(phi, axis=0)
+            shaped = seen & (norm > 0)
+            if chans.size < 2 or not np.any(shaped):
+                continue  # one channel: its unit shape is a constant, no information
+            x = phi[:, shaped] / norm[shaped]  # (n_s, m')
+            dphi = self.d_shapes[j][chans][:, shaped, :]  # (n_s, m', n_p)
+            dx = (dphi - x[:, :, None] * np.einsum("sm,smp->mp", x, dphi)[None]) / norm[shaped][None, :, None]
+            dx = dx / (s_s * np.max(np.abs(x), axis=0) / np.sqrt(2.0))[None, :, None]
+            rows.append(dx.transpose(1, 0, 2).reshape(-1, dx.shape[2]))
+        n_p = len(self.unknowns)
+        return np.concatenate(rows, axis=0) if rows else np.zeros((0, n_p))
+
+    def fisher(self, positions: Sequence[int], sensors: Sequence[int]) -> Array:
+        """Fisher information (n_p, n_p) of a plan in log-unknowns (see :meth:`jacobian`).
+
+        Parameters
+        ----------
+        positions : sequence of int
+            Indices into :attr:`positions`.
+        sensors : sequence of int
+            Indices into :attr:`sensors`.
+
+        Returns
+        -------
+        ndarray, shape (n_p, n_p)
+        """
+        jac = self.jacobian(positions, sensors)
+        return jac.T @ jac
+
+    def criterion(self, positions: Sequence[int], sensors: Sequence[int]) -> float:
+        """D-criterion ``log det(F + PRIOR I)`` of a plan (larger is better).
+
+        Parameters
+        ----------
+        positions : sequence of int
+            Indices into :attr:`positions`.
+        sensors : sequence of int
+            Indices into :attr:`sensors`.
+
+        Returns
+        -------
+        float
+        """
+        fisher = self.fisher(positions, sensors)
+        return float(np.linalg.slogdet(fisher + PRIOR * np.eye(fisher.shape[0]))[1])
+
+    def uncertainty(self, positions: Sequence[int], sensors: Sequence[int]) -> LocalUncertainty:
+        """Expected std, rank and undetermined combinations of a plan (Cramer-Rao, unit noise variance).
+
+        Parameters
+        ----------
+        positions : sequence of int
+            Indices into :attr:`positions`.
+        sensors : sequence of int
+            Indices into :attr:`sensors`.
+
+        Returns
+        -------
+        LocalUncertainty
+            In SI units of the unknowns (std nan where a direction is undetermined).
+        """
+        jac = self.jacobian(positions, sensors)
+        return jacobian_uncertainty(names=self.unknowns, values=self.values, jacobian=jac / self.values[None, :],
+                                    residuals=np.zeros(jac.shape[0]), noise_variance=1.0)
+
+
+@dataclass(frozen=True)
+class MeasurementPlan:
+    """A chosen test plan and what it is expected to determine.
+
+    Attributes
+    ----------
+    candidates : PlanCandidates
+        What the plan was chosen from.
+    position_index, sensor_index : tuple of int
+        The chosen positions and channels (indices into the candidates).
+    criterion : float
+        ``log det(F + PRIOR I)`` of the plan.
+    uncertainty : LocalUncertainty
+        Expected std (SI) of every unknown under the plan.
+    relative_std : ndarray, shape (n_p,)
+        std over value (inf where undetermined).
+    best_relative_std : ndarray, shape (n_p,)
+        The same with every candidate position and channel: a bound no plan from these candidates beats.
+    max_relative_std : float
+        Above this relative std an unknown counts as not determined.
+    random : dict
+        Random plans of the same size for comparison: their criteria and median relative std.
+    """
+
+    candidates: PlanCandidates
+    position_index: tuple[int, ...]
+    sensor_index: tuple[int, ...]
+    criterion: float
+    uncertainty: LocalUncertainty
+    relative_std: Array
+    best_relative_std: Array
+    max_relative_std: float
+    random: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def positions(self) -> list[dict[str, float]]:
+        """The chosen axis positions."""
+        return [dict(self.candidates.positions[i]) for i in self.position_index]
+
+    @property
+    def sensors(self) -> list[str]:
+        """The chosen sensor channels."""
+        return [self.candidates.sensors[i] for i in self.sensor_index]
+
+    @property
+    def undetermined(self) -> list[str]:
+        """Unknowns whose expected relative std exceeds :attr:`max_relative_std` (or that are not identifiable)."""
+        return [n for n, s in zip(self.candidates.unknowns, self.relative_std, strict=True)
+                if not s <= self.max_relative_std]
+
+    @property
+    def undetermined_by_any(self) -> list[str]:
+        """Unknowns that not even every candidate together determines: no plan of any size from them does."""
+        return [n for n, s in zip(self.candidates.unknowns, self.best_relative_std, strict=True)
+                if not s <= self.max_relative_std]
+
+    def to_dict(self) -> dict[str, Any]:
+        c = self.candidates
+        std = self.uncertainty.std
+
+        def num(v: float) -> float | None:
+            return float(v) if np.isfinite(v) else None
+
+        return {
+            "format": PLAN_FORMAT,
+            "model": c.model_name,
+            "criterion": {"name": "D-optimal Fisher information", "log_det": self.criterion, "prior": PRIOR},
+            "noise": dict(zip(("frequency", "damping", "shape"), c.noise, strict=True)),
+            "n_modes": int(c.frequency.shape[1]),
+            "visibility": c.visibility,
+            "positions": self.positions,
+            "sensors": self.sensors,
+            "unknowns": {
+                n: {"value": float(v), "std": num(s), "relative_std": num(r), "relative_std_all_candidates": num(b),
+                    "determined": bool(r <= self.max_relative_std)}
+                for n, v, s, r, b in zip(c.unknowns, c.values, std, self.relative_std, self.best_relative_std,
+                                         strict=True)
+            },
+            "max_relative_std": self.max_relative_std,
+            "undetermined": self.undetermined,
+            "undetermined_by_any_plan": self.undetermined_by_any,
+            "combinations": list(self.uncertainty.combinations),
+            "rank": self.uncertainty.rank,
+            "candidates": {"positions": [dict(p) for p in c.positions], "sensors": list(c.sensors)},
+            "random_plans": self.random,
+        }
+
+
+def plan_fisher(candidates: PlanCandidates, positions: Sequence[int], sensors: Sequence[int]) -> Array:
+    """Fisher information of a plan in log-unknowns (function form of :meth:`PlanCandidates.fisher`).
+
+    Parameters
+    ----------
+    candidates : PlanCandidates
+        The candidates' derivatives.
+    positions, sensors : sequence of int
+        Indices of the plan's positions and channels.
+
+    Returns
+    -------
+    ndarray, shape (n_p, n_p)
+    """
+    return candidates.fisher(positions, sensors)
+
+
+def _relative(unc: LocalUncertainty) -> Array:
+    rel = unc.std / np.abs(unc.values)
+    return np.where(unc.identifiable & np.isfinite(rel), rel, np.inf)
+
+
+def _greedy(score: Any, chosen: list[int], pool: Sequence[int], size: int) -> list[int]:
+    chosen = list(chosen)
+    while len(chosen) < size:
+        rest = [i for i in pool if i not in chosen]
+        values = [score([*chosen, i]) for i in rest]
+        chosen.append(rest[int(np.argmax(values))])
+    return chosen
+
+
+def _exchange(score: Any, chosen: list[int], pool: Sequence[int]) -> tuple[list[int], bool]:
+    """One pass of pairwise exchange: the best improving swap of a chosen item for an unchosen one, repeated."""
+    improved = False
+    current = score(chosen)
+    while True:
+        best, best_value = None, current
+        for k, i in itertools.product(range(len(chosen)), pool):
+            if i in chosen:
+                continue
+            trial = [*chosen[:k], i, *chosen[k + 1:]]
+            value = score(trial)
+            if value > best_value + 1e-9 * max(1.0, abs(best_value)):
+                best, best_value = trial, value
+        if best is None:
+            return chosen, improved
+        chosen, current, improved = best, best_value, True
+
+
+def plan_test(
+    *,
+    candidates: PlanCandidates,
+    n_positions: int,
+    n_sensors: int,
+    max_relative_std: float = 0.1,
+    n_random: int = 10,
+    rng: int | np.random.Generator | None = 0,
+) -> MeasurementPlan:
+    """Choose ``n_positions`` positions and ``n_sensors`` channels that maximize the D-criterion.
+
+    Positions are chosen greedily with every candidate channel, then channels greedily at those positions, then
+    pairwise exchanges of positions and of channels alternate until neither improves the criterion.
+
+    Parameters
+    ----------
+    candidates : PlanCandidates
+        The candidates' derivatives (:meth:`PlanCandidates.from_model`).
+    n_positions : int
+        Number of axis positions to measure at.
+    n_sensors : int
+        Number of sensor channels (the same channels at every position).
+    max_relative_std : float
+        An unknown whose expected relative std exceeds this counts as not determined.
+    n_random : int
+        Random plans of the same size to compare with (0: none).
+    rng : int, Generator or None
+        Seed of the random plans.
+
+    Returns
+    -------
+    MeasurementPlan
+
+    Examples
+    --------
+    >>> from cappe.model import load_model
+    >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+    >>> cands = PlanCandidates.from_model(nm, unknowns=["k11", "k12"], n_modes=2)
+    >>> plan = plan_test(candidates=cands, n_positions=1, n_sensors=2, n_random=0)
+    >>> plan.sensors, plan.undetermined
+    (['n1:x', 'n2:x'], [])
+    """
+    n_pos, n_ch = len(candidates.positions), len(candidates.sensors)
+    if not 1 <= n_positions <= n_pos:
+        msg = f"the number of positions must be from 1 to the {n_pos} candidates; got {n_positions}"
+        raise ModelError(msg)
+    if not 1 <= n_sensors <= n_ch:
+        msg = f"the number of sensor channels must be from 1 to the {n_ch} candidates; got {n_sensors}"
+        raise ModelError(msg)
+    if not max_relative_std > 0:
+        msg = f"max_relative_std must be > 0; got {max_relative_std!r}"
+        raise ModelError(msg)
+    all_ch = list(range(n_ch))
+    all_pos = list(range(n_pos))
+    positions = _greedy(lambda p: candidates.criterion(p, all_ch), [], all_pos, n_positions)
+    sensors = _greedy(lambda s: candidates.criterion(positions, s), [], all_ch, n_sensors)
+    for _ in range(MAX_PASSES):
+        positions, moved_p = _exchange(lambda p: candidates.criterion(p, sensors), positions, all_pos)
+        sensors, moved_s = _exchange(lambda s: candidates.criterion(positions, s), sensors, all_ch)
+        if not (moved_p or moved_s):
+            break
+    positions, sensors = sorted(positions), sorted(sensors)
+    unc = candidates.uncertainty(positions, sensors)
+    best = _relative(candidates.uncertainty(all_pos, all_ch))
+    random: dict[str, Any] = {}
+    if n_random > 0:
+        gen = np.random.default_rng(rng)
+        crits, medians, counts = [], [], []
+        for _ in range(n_random):
+            rp = sorted(gen.choice(n_pos, n_positions, replace=False).tolist())
+            rs = sorted(gen.choice(n_ch, n_sensors, replace=False).tolist())
+            rel = _relative(candidates.uncertainty(rp, rs))
+            crits.append(candidates.criterion(rp, rs))
+            medians.append(float(np.median(rel)))
+            counts.append(int(np.sum(~(rel <= max_relative_std))))
+        random = {"n": n_random, "seed": rng if isinstance(rng, int) else None, "criterion": crits,
+                  "median_relative_std": medians, "n_undetermined": counts}
+    return MeasurementPlan(
+        candidates=candidates,
+        position_index=tuple(positions),
+        sensor_index=tuple(sensors),
+        criterion=candidates.criterion(positions, sensors),
+        uncertainty=unc,
+        relative_std=_relative(unc),
+        best_relative_std=best,
+        max_relative_std=float(max_relative_std),
+        random=random,
+    )
