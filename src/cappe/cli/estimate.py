@@ -12,6 +12,7 @@ from typing import Any
 
 import numpy as np
 
+from cappe._format import interval_text
 from cappe.cli._common import ModelContext, UsageError, add_model_options, emit, names, naming_file, text_pairs
 
 
@@ -229,7 +230,7 @@ def _text(result: Any, method: str) -> str:
         v, s = result.values[k], result.std[k]
         rel = f"{100 * s / abs(v):10.3g}" if np.isfinite(s) and v != 0 else "         -"
         lo, hi = result.ci95[k]
-        interval = f"[{lo:.5g}, {hi:.5g}]" if np.isfinite(lo) else "not determined"
+        interval = interval_text(lo, hi, v)
         practical = diagnostics.get("practically_non_identifiable", {})
         flag = "yes" if result.identifiable[k] else f"NO ({practical[name]})" if name in practical else "NO"
         lines.append(f"  {name:>10s}  {v:13.6g}  {rel}     {interval:>24s}   {flag}")

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from cappe._format import interval_text
 from cappe.io.files import write_text
 
 __all__ = ["in_words", "parameter_legend", "write_html_report"]
@@ -90,16 +91,6 @@ def _label(position: Mapping[str, float] | None) -> str:
     return ", ".join(f"{k} = {v:g}" for k, v in position.items())
 
 
-def _interval(lo: float, hi: float, value: float) -> str:
-    """``[lo, hi]`` with enough significant digits that the two ends differ where they do (the width shows)."""
-    if not (np.isfinite(lo) and np.isfinite(hi)):
-        return "not determined"
-    width = abs(hi - lo)
-    scale = max(abs(lo), abs(hi), abs(value))
-    digits = 4 if width == 0 or scale == 0 else int(np.clip(np.ceil(np.log10(scale / width)) + 2, 4, 17))
-    return f"[{lo:.{digits}g}, {hi:.{digits}g}]"
-
-
 def _unit(unit: str) -> str:
     """A parameter unit as printed (dimensionless for an empty unit or ``1``)."""
     return "-" if unit in ("", "1") else unit
@@ -116,7 +107,7 @@ def _parameters(result: Any, truth: Mapping[str, float] | None, units: Mapping[s
         std = float(result.std[k])
         rel = 100 * std / abs(value) if value != 0 and np.isfinite(std) else float("nan")
         row = [_e(name), _e(_unit(units.get(name, ""))), _num(value, ".6g"), _num(std, ".2g"), _num(rel, ".2g"),
-               _e(_interval(lo, hi, value)),
+               _e(interval_text(lo, hi, value)),
                "yes" if result.identifiable[k] else '<span class="bad">no</span>']
         if truth is not None:
             t = truth.get(name)
