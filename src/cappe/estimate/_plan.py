@@ -19,16 +19,18 @@ A mode enters a plan only where the measured channels see it: where its largest 
 Why D-optimality (``log det`` of the Fisher matrix) with greedy selection and exchange: it is invariant to the
 scaling of the unknowns, so stiffnesses, dampings and masses of very different sizes compete fairly; it rewards
 determining every unknown (one undetermined direction costs a factor ``delta`` in the determinant) rather than
-piling information on the best-determined ones, which the trace of the Fisher matrix (T-optimality) rewards; and on the modal
-sensitivities it selects positions and sensors together, which effective independence (a sensor criterion on a
-fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the target, not the mode shapes. A weak
+piling information on the best-determined ones, which the trace of the Fisher matrix (T-optimality) rewards; and on
+the modal sensitivities it selects positions and sensors together, which effective independence (a sensor criterion
+on a fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the target, not the mode shapes. A weak
 prior ``delta I`` (relative std 1000, ``delta = 1e-6``) keeps the criterion finite while a plan is still rank
-deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange
-on the discrete candidates) reaches the exhaustive optimum in most practical cases at a tiny fraction of its cost.
+deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange on
+the discrete candidates) is not guaranteed to reach the exhaustive optimum, but every plan it returns has no single
+improving swap.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -470,8 +472,9 @@ def plan_test(
     positions = _greedy(lambda p: candidates.criterion(p, all_ch), [], all_pos, n_positions)
     sensors = _greedy(lambda s: candidates.criterion(positions, s), [], all_ch, n_sensors)
     for _ in range(MAX_PASSES):
-        positions, moved_p = _exchange(lambda p: candidates.criterion(p, sensors), positions, all_pos)
-        sensors, moved_s = _exchange(lambda s: candidates.criterion(positions, s), sensors, all_ch)
+        positions, moved_p = _exchange(functools.partial(candidates.criterion, sensors=list(sensors)), positions,
+                                       all_pos)
+        sensors, moved_s = _exchange(functools.partial(candidates.criterion, list(positions)), sensors, all_ch)
         if not (moved_p or moved_s):
             break
     positions, sensors = sorted(positions), sorted(sensors)
