@@ -107,7 +107,7 @@ def test_undetermined_scale_is_named():
     plan = plan_test(candidates=cands, n_positions=1, n_sensors=2, n_random=0)
     assert plan.uncertainty.rank == len(names) - 1
     assert set(plan.undetermined) == set(names)
-    assert set(plan.undetermined_by_any) == set(names)
+    assert set(plan.undetermined_with_all) == set(names)
     assert len(plan.uncertainty.combinations) == 1
     # with the masses known, all five are determined
     known = plan_test(candidates=PlanCandidates.from_model(nm, unknowns=names[2:], n_modes=2), n_positions=1,

@@ -173,9 +173,9 @@ def _text(plan: Any, doc: dict[str, Any], args: argparse.Namespace) -> str:
                      f"{', '.join(plan.undetermined)}")
     else:
         lines.append(f"every unknown determined within {level} (expected std)")
-    if plan.undetermined_by_any:
+    if plan.undetermined_with_all:
         lines.append(f"not determined even with every candidate position and channel measured: "
-                     f"{', '.join(plan.undetermined_by_any)}")
+                     f"{', '.join(plan.undetermined_with_all)}")
     for combo in plan.uncertainty.combinations:
         lines.append(f"undetermined combination (relative): {combo}")
     rnd = plan.random

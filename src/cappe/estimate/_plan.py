@@ -295,7 +295,8 @@ class MeasurementPlan:
     relative_std : ndarray, shape (n_p,)
         std over value (inf where undetermined).
     best_relative_std : ndarray, shape (n_p,)
-        The same with every candidate position and channel: a bound no plan from these candidates beats.
+        The same with every candidate position and channel measured (not a strict bound, see
+        :attr:`undetermined_with_all`).
     max_relative_std : float
         Above this relative std an unknown counts as not determined.
     random : dict
@@ -329,8 +330,12 @@ class MeasurementPlan:
                 if not s <= self.max_relative_std]
 
     @property
-    def undetermined_by_any(self) -> list[str]:
-        """Unknowns that not even every candidate together determines: no plan of any size from them does."""
+    def undetermined_with_all(self) -> list[str]:
+        """Unknowns left above :attr:`max_relative_std` even with every candidate measured.
+
+        Not a proof over all plans: a channel with a large component raises the shape noise of the others (it is
+        relative to the largest measured component), so a subset can determine a shape-borne unknown better.
+        """
         return [n for n, s in zip(self.candidates.unknowns, self.best_relative_std, strict=True)
                 if not s <= self.max_relative_std]
 
@@ -358,7 +363,7 @@ class MeasurementPlan:
             },
             "max_relative_std": self.max_relative_std,
             "undetermined": self.undetermined,
-            "undetermined_by_any_plan": self.undetermined_by_any,
+            "undetermined_with_all_candidates": self.undetermined_with_all,
             "combinations": list(self.uncertainty.combinations),
             "rank": self.uncertainty.rank,
             "candidates": {"positions": [dict(p) for p in c.positions], "sensors": list(c.sensors)},
