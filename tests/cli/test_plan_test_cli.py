@@ -6,6 +6,8 @@ from __future__ import annotations
 import json
 import shlex
 
+import pytest
+
 from cappe.cli import main
 from cappe.io import read_modal_data
 
@@ -62,3 +64,13 @@ def test_plan_test_bad_input(capsys):
                        "--noise-shape", "0")
     assert code == 2
     assert "noise levels must be > 0" in err
+
+
+def test_grid_candidates_span_the_listed_range(capsys):
+    code, out, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--grid", 3, "--n-positions", 1,
+                         "--n-sensors", 2, "--candidate-sensors", "nut", "--modes", 4, "--unknowns", "lgs_kx",
+                         "--random", 0, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [p["z"] for p in doc["candidates"]["positions"]] == pytest.approx([-0.294, 0.018, 0.33])
+    assert doc["candidates"]["sensors"] == ["nut:x", "nut:y", "nut:z"]
