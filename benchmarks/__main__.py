@@ -13,6 +13,7 @@ from benchmarks import (
     bench_modal,
     bench_monitor,
     bench_pipeline,
+    bench_plan,
     bench_scaling,
     bench_sobol,
     bench_startup,
@@ -32,6 +33,7 @@ def main() -> None:
     bench_monitor.main()
     bench_pipeline.main()
     bench_automated.main()
+    bench_plan.main()
     bench_subproblem.main()
     bench_lm.main()
     bench_scaling.main()

@@ -85,7 +85,8 @@ def _candidate_positions(args: argparse.Namespace, structure: Any, base: dict[st
     else:
         values = {name: list(a.positions) for name, a in axes.items() if a.positions}
     order = [a for a in structure.axis_names if a in values]
-    return [{**base, **dict(zip(order, combo, strict=True))} for combo in itertools.product(*(values[a] for a in order))]
+    combos = itertools.product(*(values[a] for a in order))
+    return [{**base, **dict(zip(order, combo, strict=True))} for combo in combos]
 
 
 def _positions_option(positions: list[dict[str, float]], axes: tuple[str, ...]) -> list[str]:
@@ -115,6 +116,9 @@ def run(args: argparse.Namespace) -> int:
         raise UsageError(msg)
     ctx = ModelContext(args)
     positions = _candidate_positions(args, ctx.structure, ctx.position)
+    if args.n_positions > len(positions):
+        msg = f"--n-positions {args.n_positions}: only {len(positions)} candidate positions"
+        raise UsageError(msg)
     candidates = PlanCandidates.from_model(
         ctx.numeric, unknowns=names(args.unknowns), params=ctx.values, positions=positions,
         sensors=names(args.candidate_sensors), n_modes=args.modes,
@@ -169,9 +173,9 @@ def _text(plan: Any, doc: dict[str, Any], args: argparse.Namespace) -> str:
                      f"{', '.join(plan.undetermined)}")
     else:
         lines.append(f"every unknown determined within {level} (expected std)")
-    if plan.undetermined_by_any:
+    if plan.undetermined_with_all:
         lines.append(f"not determined even with every candidate position and channel measured: "
-                     f"{', '.join(plan.undetermined_by_any)}")
+                     f"{', '.join(plan.undetermined_with_all)}")
     for combo in plan.uncertainty.combinations:
         lines.append(f"undetermined combination (relative): {combo}")
     rnd = plan.random

@@ -303,8 +303,8 @@ def _run_modal(args: argparse.Namespace) -> int:
     positions = _parse_positions(args.positions, ctx)
     levels = {key: getattr(args, f"noise_{key}") or 0.0 for key in ("frequency", "damping", "shape")}
     ref = reference_modes(model, params=ctx.values, positions=positions, n_modes=args.modes,
-                          sensors=names(args.sensors), noise_frequency=levels["frequency"], noise_damping=levels["damping"],
-                          noise_shape=levels["shape"], rng=args.seed)
+                          sensors=names(args.sensors), noise_frequency=levels["frequency"],
+                          noise_damping=levels["damping"], noise_shape=levels["shape"], rng=args.seed)
     sets = [dict(s.position) for s in ref.sets]
 
     frfs = []

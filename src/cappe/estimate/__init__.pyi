@@ -22,6 +22,7 @@ from ._hybrid import HybridEstimator
 from ._kalman import ExtendedKalmanEstimator, UnscentedKalmanEstimator
 from ._modal_updating import ModalUpdatingEstimator
 from ._one_step import FRFDerivatives, OneStepEstimator, OneStepFRFEstimator, frf_derivatives
+from ._plan import PLAN_FORMAT, MeasurementPlan, PlanCandidates, plan_fisher, plan_test
 from ._registry import METHODS, estimator_class
 from ._resampling import (
     BootstrapResult,
@@ -99,4 +100,9 @@ __all__ = [
     "jacobian_uncertainty",
     "read_estimate",
     "write_estimate",
+    "PLAN_FORMAT",
+    "MeasurementPlan",
+    "PlanCandidates",
+    "plan_fisher",
+    "plan_test",
 ]

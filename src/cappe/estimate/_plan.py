@@ -19,16 +19,18 @@ A mode enters a plan only where the measured channels see it: where its largest 
 Why D-optimality (``log det`` of the Fisher matrix) with greedy selection and exchange: it is invariant to the
 scaling of the unknowns, so stiffnesses, dampings and masses of very different sizes compete fairly; it rewards
 determining every unknown (one undetermined direction costs a factor ``delta`` in the determinant) rather than
-piling information on the best-determined ones, which the trace of the Fisher matrix (T-optimality) rewards; and on the modal
-sensitivities it selects positions and sensors together, which effective independence (a sensor criterion on a
-fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the target, not the mode shapes. A weak
+piling information on the best-determined ones, which the trace of the Fisher matrix (T-optimality) rewards; and on
+the modal sensitivities it selects positions and sensors together, which effective independence (a sensor criterion
+on a fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the target, not the mode shapes. A weak
 prior ``delta I`` (relative std 1000, ``delta = 1e-6``) keeps the criterion finite while a plan is still rank
-deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange
-on the discrete candidates) reaches the exhaustive optimum in most practical cases at a tiny fraction of its cost.
+deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange on
+the discrete candidates) is not guaranteed to reach the exhaustive optimum, but every plan it returns has no single
+improving swap.
 """
 
 from __future__ import annotations
 
+import functools
 import itertools
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
@@ -293,7 +295,8 @@ class MeasurementPlan:
     relative_std : ndarray, shape (n_p,)
         std over value (inf where undetermined).
     best_relative_std : ndarray, shape (n_p,)
-        The same with every candidate position and channel: a bound no plan from these candidates beats.
+        The same with every candidate position and channel measured (not a strict bound, see
+        :attr:`undetermined_with_all`).
     max_relative_std : float
         Above this relative std an unknown counts as not determined.
     random : dict
@@ -327,8 +330,12 @@ class MeasurementPlan:
                 if not s <= self.max_relative_std]
 
     @property
-    def undetermined_by_any(self) -> list[str]:
-        """Unknowns that not even every candidate together determines: no plan of any size from them does."""
+    def undetermined_with_all(self) -> list[str]:
+        """Unknowns left above :attr:`max_relative_std` even with every candidate measured.
+
+        Not a proof over all plans: a channel with a large component raises the shape noise of the others (it is
+        relative to the largest measured component), so a subset can determine a shape-borne unknown better.
+        """
         return [n for n, s in zip(self.candidates.unknowns, self.best_relative_std, strict=True)
                 if not s <= self.max_relative_std]
 
@@ -356,7 +363,7 @@ class MeasurementPlan:
             },
             "max_relative_std": self.max_relative_std,
             "undetermined": self.undetermined,
-            "undetermined_by_any_plan": self.undetermined_by_any,
+            "undetermined_with_all_candidates": self.undetermined_with_all,
             "combinations": list(self.uncertainty.combinations),
             "rank": self.uncertainty.rank,
             "candidates": {"positions": [dict(p) for p in c.positions], "sensors": list(c.sensors)},
@@ -470,8 +477,9 @@ def plan_test(
     positions = _greedy(lambda p: candidates.criterion(p, all_ch), [], all_pos, n_positions)
     sensors = _greedy(lambda s: candidates.criterion(positions, s), [], all_ch, n_sensors)
     for _ in range(MAX_PASSES):
-        positions, moved_p = _exchange(lambda p: candidates.criterion(p, sensors), positions, all_pos)
-        sensors, moved_s = _exchange(lambda s: candidates.criterion(positions, s), sensors, all_ch)
+        positions, moved_p = _exchange(functools.partial(candidates.criterion, sensors=list(sensors)), positions,
+                                       all_pos)
+        sensors, moved_s = _exchange(functools.partial(candidates.criterion, list(positions)), sensors, all_ch)
         if not (moved_p or moved_s):
             break
     positions, sensors = sorted(positions), sorted(sensors)

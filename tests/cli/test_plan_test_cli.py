@@ -1,0 +1,76 @@
+"""``cappe plan-test``: the plan file, the text report (expected std, undetermined unknowns, a ready command line),
+and the chain it feeds: ``cappe simulate --sensors`` writes the plan's channels at the plan's positions."""
+
+from __future__ import annotations
+
+import json
+import shlex
+
+import pytest
+
+from cappe.cli import main
+from cappe.io import read_modal_data
+
+
+def run(capsys, *argv):
+    code = main([str(a) for a in argv])
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def test_plan_test_writes_a_plan_the_simulate_chain_takes(tmp_path, capsys):
+    out = tmp_path / "plan.json"
+    code, text, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 2, "--n-sensors", 4,
+                          "--candidate-sensors", "table_fl,nut,rotor,me1_node", "--modes", 8,
+                          "--unknowns", "me1_kx,lgs_kx,cpl_krz,bsd_drz", "--random", 3, "-o", out)
+    assert code == 0, err
+    doc = json.loads(out.read_text())
+    assert doc["format"] == "cappe.plan/1"
+    assert len(doc["positions"]) == 2
+    assert len(doc["sensors"]) == 4
+    assert "std % plan" in text
+    assert "bsd_drz" in text
+    # the damping of the ball-screw drive is not determined by 4 channels (the text says so, naming it)
+    assert doc["unknowns"]["bsd_drz"]["determined"] is False
+    assert any(line.startswith("not determined by this plan") and "bsd_drz" in line for line in text.splitlines())
+    assert "3 random plans of the same size" in text
+    # the ready command line runs and gives modes at exactly the plan's positions and channels
+    argv = shlex.split(doc["commands"]["simulate"])[1:]
+    i = argv.index("--params")
+    del argv[i:i + 2]
+    argv[argv.index("-o") + 1] = str(tmp_path / "ref.json")
+    code, _, err = run(capsys, *argv)
+    assert code == 0, err
+    ref = read_modal_data(tmp_path / "ref.json")
+    assert list(ref.sensors) == doc["sensors"]
+    assert [dict(s.position) for s in ref.sets] == doc["positions"]
+
+
+def test_simulate_sensors_option_restricts_channels(tmp_path, capsys):
+    code, _, err = run(capsys, "simulate", "builtin:two-mass-rig", "--sensors", "n1:x,n2:x", "-o", tmp_path / "r.json")
+    assert code == 0, err
+    assert list(read_modal_data(tmp_path / "r.json").sensors) == ["n1:x", "n2:x"]
+
+
+def test_plan_test_bad_input(capsys):
+    code, _, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 9, "--n-sensors", 2)
+    assert code == 2
+    assert "only 4 candidate positions" in err
+    code, _, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 1, "--n-sensors", 2,
+                       "--candidate-positions", "x=0.1")
+    assert code == 2
+    assert "--candidate-positions" in err
+    code, _, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 1, "--n-sensors", 2,
+                       "--noise-shape", "0")
+    assert code == 2
+    assert "noise levels must be > 0" in err
+
+
+def test_grid_candidates_span_the_listed_range(capsys):
+    code, out, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--grid", 3, "--n-positions", 1,
+                         "--n-sensors", 2, "--candidate-sensors", "nut", "--modes", 4, "--unknowns", "lgs_kx",
+                         "--random", 0, "--json")
+    assert code == 0, err
+    doc = json.loads(out)
+    assert [p["z"] for p in doc["candidates"]["positions"]] == pytest.approx([-0.294, 0.018, 0.33])
+    assert doc["candidates"]["sensors"] == ["nut:x", "nut:y", "nut:z"]
