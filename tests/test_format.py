@@ -16,7 +16,8 @@ def test_printed_ends_recover_the_interval_to_a_tenth_of_its_width(relative_widt
         text = interval_text(lo, hi, value)
         a, b = (float(x) for x in text.strip("[]").split(","))
         assert a < b
-        assert abs(a - lo) <= 0.1 * (hi - lo) and abs(b - hi) <= 0.1 * (hi - lo), text
+        assert abs(a - lo) <= 0.1 * (hi - lo), text
+        assert abs(b - hi) <= 0.1 * (hi - lo), text
 
 
 def test_undetermined_and_degenerate_intervals():
