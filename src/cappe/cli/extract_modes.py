@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from cappe.cli._common import UsageError, add_output_options, band, emit, names, naming_file, text_pairs
+from cappe.cli._common import (
+    UsageError,
+    add_output_options,
+    band,
+    emit,
+    names,
+    naming_file,
+    number_pairs,
+    text_pairs,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -24,6 +33,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="driving-point pair for mass-normalized shapes (repeatable)")
     p.add_argument("--sensor", metavar="OUTPUT=NODE:DIR", action="append", default=[],
                    help="label an FRF output as a sensor DOF for the mode shapes, e.g. d1=n1:x (repeatable)")
+    p.add_argument("--sensor-map", metavar="MAP.csv",
+                   help="CSV 'channel,sensor' naming the model sensor channel of each measured channel (e.g. "
+                        "5:-z,table_fl:z); a negative measured direction is flipped to the model's positive one; "
+                        "channels not in the map are left out")
+    p.add_argument("--position", metavar="AXIS=VALUE", action="append", default=[],
+                   help="axis position of the measurement, recorded in the modal file, e.g. z=0.135 (repeatable "
+                        "or comma-separated)")
     p.add_argument("--uff", metavar="FILE.uff", help="also write the modes as UFF 55 (outputs must be NODE:DIR)")
     p.add_argument("--plot", metavar="FILE.png", help="stabilization diagram with the selected poles")
     add_output_options(p)
@@ -34,6 +50,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import extract_modes
     from cappe.io import read_frf, write_modal_data, write_uff_modal
+    from cappe.io.sensor_map import apply_sensor_map, map_channels, read_sensor_map
 
     frf = read_frf(args.frf)
     labels = text_pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
@@ -41,7 +58,18 @@ def run(args: argparse.Namespace) -> int:
     if unknown:
         msg = f"--sensor names outputs {unknown} that {args.frf} lacks; its outputs are {list(frf.output_names)}"
         raise UsageError(msg)
-    frf = replace(frf, output_names=tuple(labels.get(name, name) for name in frf.output_names))
+    if args.sensor_map and labels:
+        msg = "give either --sensor-map or --sensor, not both"
+        raise UsageError(msg)
+    position = number_pairs([v for item in args.position for v in item.split(",") if v.strip()], "--position")
+    # a sensor map, or the --sensor labels (every other output as it is): a negative measured direction is
+    # flipped to the model's positive direction, never kept (issue 20)
+    mapping = read_sensor_map(args.sensor_map) if args.sensor_map else \
+        {name: labels.get(name, name) for name in (*frf.output_names, *frf.input_names)}
+    original = (*frf.output_names, *frf.input_names)
+    renamed = dict(zip(original, (s or n for (s, _), n in zip(map_channels(original, mapping), original,
+                                                               strict=True)), strict=True))
+    frf, notes = apply_sensor_map(frf, mapping, args.sensor_map or "")
     unlabelled = [name for name in frf.output_names if ":" not in name]
     if args.uff and unlabelled:
         msg = (f"--uff needs every FRF output as a NODE:DIR sensor label; label {unlabelled} with "
@@ -55,14 +83,16 @@ def run(args: argparse.Namespace) -> int:
         msg = f"--near must be a comma-separated list of frequencies in Hz; got {args.near!r}"
         raise UsageError(msg) from exc
     pairs = text_pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
-    driving = {inp: labels.get(out, out) for inp, out in pairs.items()}
+    driving = {renamed.get(inp, inp): renamed.get(out, out) for inp, out in pairs.items()}
     result = extract_modes(
         frf, band=lo_hi, max_order=args.max_order, n_modes=args.n_modes, method=args.method,
         selection=selection, driving_points=driving or None,
     )
     modal = result.to_modal_data()
+    if position:
+        modal = replace(modal, sets=tuple(replace(s, position=dict(position)) for s in modal.sets))
     data = result.to_dict()
-    data = {**data, "band": list(lo_hi), "method": args.method}
+    data = {**data, "band": list(lo_hi), "method": args.method, "position": position, "notes": notes}
     if args.out:
         write_modal_data(args.out, modal)
     if args.uff:
@@ -73,12 +103,12 @@ def run(args: argparse.Namespace) -> int:
 
         stabilization_plot(result.diagram, args.plot, frf=frf, selected=result.selection)
         data["plot"] = args.plot
-    lines = [f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
+    lines = [*notes, f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
              f"{args.max_order}):", "   mode   frequency (Hz)   damping (%)   support"]
     for k, (f, z, n) in enumerate(zip(result.frequency, result.damping, result.selection.support, strict=True)):
         lines.append(f"  {k + 1:5d}   {f:14.4f}   {100 * z:11.4f}   {n:7d}")
     if args.out:
-        lines.append(f"wrote {args.out} (cappe.modal/1)")
+        lines.append(f"wrote {args.out} (cappe.modal/1{', position ' + str(position) if position else ''})")
     # -o receives the modal data contract (cappe.modal/1), not this summary: print only
     emit(argparse.Namespace(**{**vars(args), "out": None}), data, "\n".join(lines))
     return 0
