@@ -7,9 +7,13 @@
      "sets": [{"position": {"z": -0.294}, "frequency": [Hz, ...], "damping": [ratio, ...],
                "shape_re": [[per sensor] per mode], "shape_im": [[...] per mode]}, ...]}
 
-``shape_im`` may be omitted for real shapes. The data types, :class:`~cappe.systems.ModalData` and
-:class:`~cappe.systems.ModalDataSet`, live in :mod:`cappe.systems.modal`; this module reads, validates and writes
-them (and hands them on under their old names, ``cappe.io.modal.ModalData``).
+``shape_im`` may be omitted for real shapes. A set may carry standard deviations estimated from the data, one per
+mode: ``frequency_std`` (Hz), ``damping_std`` (damping ratio) and ``shape_std`` (of each shape component, real and
+imaginary part alike, in the units of the shape); ``cappe identify`` weights its residuals by them.
+
+The data types, :class:`~cappe.systems.ModalData` and :class:`~cappe.systems.ModalDataSet`, live in
+:mod:`cappe.systems.modal`; this module reads, validates and writes them (and hands them on under their old
+names, ``cappe.io.modal.ModalData``).
 """
 
 from __future__ import annotations
@@ -23,7 +27,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.io.files import finite_number, read_json, shown, write_json
-from cappe.systems.modal import MODAL_FORMAT, ModalData, ModalDataSet
+from cappe.systems.modal import MODAL_FORMAT, STD_FIELDS, ModalData, ModalDataSet
 
 __all__ = [
     "MODAL_FORMAT",
@@ -135,7 +139,16 @@ def modal_data_from_mapping(data: Mapping[str, Any], source: str = "") -> ModalD
                 raise DataError(msg)
             for r, row in enumerate(rows):
                 shapes[:, r] += part * _numbers(row, f"{entry}.{name}[{r}]", source, length=n_s)
-        sets.append(ModalDataSet(pos, freq, damping, shapes))
+        stds: dict[str, NDArray[np.float64]] = {}
+        for name in STD_FIELDS:
+            if raw.get(name) is None:
+                continue
+            std = _numbers(raw[name], f"{entry}.{name}", source, length=m)
+            if np.any(std < 0):
+                msg = f"{entry}.{name} must be >= 0 {_where(source, entry)}"
+                raise DataError(msg)
+            stds[name] = std
+        sets.append(ModalDataSet(pos, freq, damping, shapes, **stds))
     return ModalData(tuple(sensors), tuple(sets), source)
 
 

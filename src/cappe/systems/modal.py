@@ -24,6 +24,8 @@ __all__ = ["MODAL_FORMAT", "ModalData", "ModalDataSet", "ModalSet", "dominant_do
 
 #: Format string of modal data documents (:meth:`ModalData.to_dict`; read and written by :mod:`cappe.io`).
 MODAL_FORMAT = "cappe.modal/1"
+#: Optional per-mode standard deviations of a cappe.modal/1 set (absolute: Hz, ratio, shape units).
+STD_FIELDS = ("frequency_std", "damping_std", "shape_std")
 
 
 @dataclass(frozen=True)
@@ -158,12 +160,19 @@ class ModalDataSet:
         Damping ratios.
     shapes : ndarray of complex, shape (n_sensors, n_modes)
         Mode shapes at the sensors, one mode per column.
+    frequency_std, damping_std, shape_std : ndarray, shape (n_modes,), optional
+        Standard deviations estimated from the data (``cappe extract-modes``): of each frequency (Hz), each
+        damping ratio, and of each component of a mode's shape (real and imaginary part alike, in the units of
+        ``shapes``). None where unknown.
     """
 
     position: dict[str, float]
     frequency: NDArray[np.float64]
     damping: NDArray[np.float64]
     shapes: NDArray[np.complex128]
+    frequency_std: NDArray[np.float64] | None = None
+    damping_std: NDArray[np.float64] | None = None
+    shape_std: NDArray[np.float64] | None = None
 
     @property
     def n_modes(self) -> int:
@@ -177,13 +186,18 @@ class ModalDataSet:
         return np.asarray(-z * w + 1j * w * np.sqrt(np.clip(1 - z**2, 0, None)), dtype=complex)
 
     def to_dict(self) -> dict[str, Any]:
-        return {
+        out: dict[str, Any] = {
             "position": dict(self.position),
             "frequency": self.frequency.tolist(),
             "damping": self.damping.tolist(),
             "shape_re": self.shapes.real.T.tolist(),
             "shape_im": self.shapes.imag.T.tolist(),
         }
+        for name in STD_FIELDS:
+            value = getattr(self, name)
+            if value is not None:
+                out[name] = np.asarray(value, dtype=float).tolist()
+        return out
 
 
 @dataclass(frozen=True)
