@@ -55,9 +55,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                    help="relative noise of the reference's frequencies, damping ratios and shapes (e.g. "
                         "0.005,0.05,0.02): weights the final refinement by it")
     p.add_argument("--shapes", choices=("real", "complex"), default="real",
-                   help="shapes the final refinement compares: realized (real) model and reference shapes, unbiased "
-                        "by mode complexity that an LSCF/LSFD fit of measured FRFs cannot reproduce (default), or "
-                        "complex shapes as they are")
+                   help="shapes the final refinement compares: realized model and reference shapes (real part at "
+                        "their principal phase: blind to mode complexity that an LSCF/LSFD fit of hysteretically "
+                        "damped FRFs cannot reproduce; default), or complex shapes as they are")
     p.add_argument("--first-order", action="store_true",
                    help="final refinement on first-order modes (for first-order references) instead of exact ones")
     p.add_argument("--permutations", type=int, default=10,

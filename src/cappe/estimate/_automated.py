@@ -125,11 +125,15 @@ class AutomatedIdentification(Estimator):
         :class:`ExactModalProblem`), which makes its 95 % intervals meaningful. Needs ``exact``.
     shapes : {"real", "complex"}
         Shapes the exact-mode refinement compares. ``"real"`` (default): model and reference shapes are each
-        realized (turned to their principal phase, real part kept; :func:`~cappe.estimate._exact_modal.realized`)
-        before the comparison, so that mode complexity that a rational (LSCF/LSFD) fit of measured FRFs cannot
-        reproduce, as with hysteretic damping ``K + iH`` whose mirrored poles are not complex conjugates, does not
-        bias the stiffnesses; frequencies and damping ratios still come from the exact complex poles. Exact at the
-        truth for references simulated with exact modes too. ``"complex"``: complex shapes as they are.
+        realized (turned to their principal phase, real part kept; :func:`~cappe.estimate._exact_modal.realized`),
+        which removes the mode complexity that a rational (LSCF/LSFD) fit of FRFs with hysteretic damping
+        ``K + iH`` cannot reproduce (its mirrored poles are not complex conjugates): 1 - MAC between extracted and
+        exact modes at the truth halves (0.005 -> 0.0025). Frequencies and damping ratios still come from the
+        exact complex poles; exact at the truth for simulated references too. ``"complex"``: complex shapes as
+        they are, which keep the phase of non-proportional damping. Measured on the chain of
+        ``benchmarks/bench_real_chain.py`` (3 truths, same extracted modes and start): worst stiffness error
+        2.2 / 3.6 / 2.1 % realized against 2.2 / 2.2 / 20.7 % complex, worst damping error 43 / 40 / 64 % against
+        30 / 6 / 27 % (issue 20).
     overlay : (str, str), optional
         Output and input channel of the FRF the validation step keeps for overlays (default: the driving point with
         the largest peak).
