@@ -5,7 +5,16 @@ from __future__ import annotations
 import argparse
 from dataclasses import replace
 
-from cappe.cli._common import UsageError, add_output_options, band, emit, names, naming_file, text_pairs
+from cappe.cli._common import (
+    UsageError,
+    add_output_options,
+    band,
+    emit,
+    names,
+    naming_file,
+    number_pairs,
+    text_pairs,
+)
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -30,6 +39,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--bootstrap", type=int, default=30, metavar="N",
                    help="bootstrap replicates for the standard deviations of frequency, damping and shapes "
                         "(default 30; 0 skips them)")
+    p.add_argument("--sensor-map", metavar="MAP.csv",
+                   help="CSV 'channel,sensor' naming the model sensor channel of each measured channel (e.g. "
+                        "5:-z,table_fl:z); a negative measured direction is flipped to the model's positive one; "
+                        "channels not in the map are left out")
+    p.add_argument("--position", metavar="AXIS=VALUE", action="append", default=[],
+                   help="axis position of the measurement, recorded in the modal file, e.g. z=0.135 (repeatable "
+                        "or comma-separated)")
     p.add_argument("--uff", metavar="FILE.uff", help="also write the modes as UFF 55 (outputs must be NODE:DIR)")
     p.add_argument("--plot", metavar="FILE.png", help="stabilization diagram with the selected poles")
     add_output_options(p)
@@ -40,6 +56,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 def run(args: argparse.Namespace) -> int:
     from cappe.identify import extract_modes
     from cappe.io import read_frf, write_modal_data, write_uff_modal
+    from cappe.io.sensor_map import apply_sensor_map, map_channels, read_sensor_map
 
     frf = read_frf(args.frf)
     labels = text_pairs(args.sensor, "--sensor", "OUTPUT=NODE:DIR")
@@ -49,11 +66,21 @@ def run(args: argparse.Namespace) -> int:
         msg = (f"--sensor names channels {unknown} that {args.frf} lacks; its outputs are "
                f"{list(frf.output_names)}, its inputs {list(frf.input_names)}")
         raise UsageError(msg)
-    frf = replace(frf, output_names=tuple(labels.get(name, name) for name in frf.output_names),
-                  input_names=tuple(labels.get(name, name) for name in frf.input_names))
+    if args.sensor_map and labels:
+        msg = "give either --sensor-map or --sensor, not both"
+        raise UsageError(msg)
     if args.bootstrap < 0 or args.bootstrap == 1:
         msg = f"--bootstrap must be 0 (no standard deviations) or at least 2; got {args.bootstrap}"
         raise UsageError(msg)
+    position = number_pairs([v for item in args.position for v in item.split(",") if v.strip()], "--position")
+    # a sensor map, or the --sensor labels (every other channel as it is): a negative measured direction is
+    # flipped to the model's positive direction, never kept (issue 20)
+    mapping = read_sensor_map(args.sensor_map) if args.sensor_map else \
+        {name: labels.get(name, name) for name in (*frf.output_names, *frf.input_names)}
+    original = (*frf.output_names, *frf.input_names)
+    renamed = dict(zip(original, (s or n for (s, _), n in zip(map_channels(original, mapping), original,
+                                                               strict=True)), strict=True))
+    frf, notes = apply_sensor_map(frf, mapping, args.sensor_map or "")
     shape_points = frf.input_names if _reciprocal(frf, args.reference_side) else frf.output_names
     unlabelled = [name for name in shape_points if ":" not in name]
     if args.uff and unlabelled:
@@ -68,15 +95,17 @@ def run(args: argparse.Namespace) -> int:
         msg = f"--near must be a comma-separated list of frequencies in Hz; got {args.near!r}"
         raise UsageError(msg) from exc
     pairs = text_pairs(args.driving_point, "--driving-point", "INPUT=OUTPUT")
-    driving = {labels.get(inp, inp): labels.get(out, out) for inp, out in pairs.items()}
+    driving = {renamed.get(inp, inp): renamed.get(out, out) for inp, out in pairs.items()}
     result = extract_modes(
         frf, band=lo_hi, max_order=args.max_order, n_modes=args.n_modes, method=args.method,
         selection=selection, driving_points=driving or None, reference_side=args.reference_side,
         n_bootstrap=args.bootstrap,
     )
     modal = result.to_modal_data()
+    if position:
+        modal = replace(modal, sets=tuple(replace(s, position=dict(position)) for s in modal.sets))
     data = result.to_dict()
-    data = {**data, "band": list(lo_hi), "method": args.method}
+    data = {**data, "band": list(lo_hi), "method": args.method, "position": position, "notes": notes}
     if args.out:
         write_modal_data(args.out, modal)
     if args.uff:
@@ -87,7 +116,7 @@ def run(args: argparse.Namespace) -> int:
 
         stabilization_plot(result.diagram, args.plot, frf=frf, selected=result.selection)
         data["plot"] = args.plot
-    lines = [f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
+    lines = [*notes, f"{len(result.frequency)} modes in {lo_hi[0]:g}-{lo_hi[1]:g} Hz ({args.method}, orders up to "
              f"{args.max_order}):"]
     if result.reciprocity:
         lines.append(f"read by reciprocity: reference {', '.join(result.fit.input_names)}; shapes at the "
@@ -104,7 +133,7 @@ def run(args: argparse.Namespace) -> int:
         lines.append("std: not estimated (--bootstrap 0)")
     lines.extend(f"warning: {w}" for w in result.warnings)
     if args.out:
-        lines.append(f"wrote {args.out} (cappe.modal/1)")
+        lines.append(f"wrote {args.out} (cappe.modal/1{', position ' + str(position) if position else ''})")
     # -o receives the modal data contract (cappe.modal/1), not this summary: print only
     emit(argparse.Namespace(**{**vars(args), "out": None}), data, "\n".join(lines))
     return 0

@@ -33,7 +33,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
         ),
     )
     p.add_argument("model", metavar="MODEL", help="model YAML file or builtin:NAME")
-    p.add_argument("--reference", required=True, metavar="FILE.json", help="reference modes (cappe.modal/1)")
+    p.add_argument("--reference", required=True, nargs="+", metavar="FILE.json",
+                   help="reference modes (cappe.modal/1), one file per axis position or one file with several sets; "
+                        "the sets of all files are one reference, told apart by their 'position' (two sets at one "
+                        "position are an error), at the sensors the files share")
+    p.add_argument("--sensor-map", metavar="MAP.csv",
+                   help="CSV 'channel,sensor' naming the model sensor channel of each reference sensor label (e.g. "
+                        "5:-z,table_fl:z); negative measured directions are flipped")
     p.add_argument("--validation", metavar="AXIS=VALUE,...",
                    help="position held out for validation, e.g. z=-0.294; 'none' to identify from every position "
                         "(default: the reference's first position when it has two or more)")
@@ -51,6 +57,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                             "simulate): with all three, the final refinement is weighted by them")
     add_deprecated(p, "--noise", dest="noise", instead="--noise-frequency F --noise-damping Z --noise-shape S",
                    metavar="F,Z,S")
+    p.add_argument("--shapes", choices=("real", "complex"), default="real",
+                   help="shapes the final refinement compares: realized model and reference shapes (real part at "
+                        "their principal phase: blind to mode complexity that an LSCF/LSFD fit of hysteretically "
+                        "damped FRFs cannot reproduce; default), or complex shapes as they are")
     p.add_argument("--first-order", action="store_true",
                    help="final refinement on first-order modes (for first-order references) instead of exact ones")
     p.add_argument("--permutations", type=int, default=10,
@@ -106,9 +116,52 @@ def _noise(args: argparse.Namespace) -> tuple[float, float, float] | None:
     return (given["frequency"], given["damping"], given["shape"])
 
 
+def combined_reference(paths: list[str], sensor_map: str | None = None) -> tuple[Any, list[str]]:
+    """The sets of several cappe.modal/1 files as one reference, and the lines a user should see about it.
+
+    Sets are told apart by their position; the files' sensors are renamed by ``sensor_map`` (negative measured
+    directions flipped) and reduced to those every file has.
+    """
+    from dataclasses import replace
+
+    from cappe.exceptions import DataError
+    from cappe.io import read_modal_data
+    from cappe.io.sensor_map import map_modal_data, read_sensor_map
+    from cappe.systems.modal import ModalData
+
+    mapping = read_sensor_map(sensor_map) if sensor_map else None
+    notes: list[str] = []
+    parts = []
+    for path in paths:
+        data, more = map_modal_data(read_modal_data(path), mapping, sensor_map or "")
+        notes += [f"{path}: {line}" for line in more]
+        parts.append((path, data))
+    common = [s for s in parts[0][1].sensors if all(s in d.sensors for _, d in parts[1:])]
+    if not common:
+        msg = f"the reference files {paths} share no sensor channel"
+        raise DataError(msg)
+    sets = []
+    seen: dict[tuple[tuple[str, float], ...], str] = {}
+    for path, data in parts:
+        rows = [data.sensors.index(s) for s in common]
+        if len(rows) < len(data.sensors):
+            notes.append(f"warning: {path}: {len(data.sensors) - len(rows)} sensor(s) that the other reference "
+                         "files lack are left out")
+        for k, data_set in enumerate(data.sets):
+            key = tuple(sorted(data_set.position.items()))
+            if key in seen:
+                msg = (f"{path}, sets[{k}]: position {data_set.position} is already given by {seen[key]}; each "
+                       "position must come once (record it with cappe extract-modes --position)")
+                raise DataError(msg)
+            seen[key] = f"{path}"
+            sets.append(replace(data_set, shapes=data_set.shapes[rows]))
+    source = paths[0] if len(paths) == 1 else ", ".join(paths)
+    return ModalData(tuple(common), tuple(sets), source), notes
+
+
 def run(args: argparse.Namespace) -> int:
     from cappe.estimate._automated import AutomatedIdentification
-    from cappe.io import read_modal_data, read_parameters
+    from cappe.io import read_parameters
     from cappe.model import NumericModel, load_model
 
     for option, value, low in (("--n-gsa", args.n_gsa, 2), ("--n-opt", args.n_opt, 1),
@@ -131,8 +184,11 @@ def run(args: argparse.Namespace) -> int:
     truth = read_parameters(args.truth) if args.truth else None
     if truth is not None:
         structure.resolve_parameters(truth)
-    reference = read_modal_data(args.reference)
+    reference, notes = combined_reference(args.reference, args.sensor_map)
     validation = _position(args.validation, reference)
+    if args.validation is None and validation is not None:
+        notes.append(f"validation position {validation} chosen by default (the reference's first set); "
+                     "choose it with --validation")
     progress = bool(args.progress or sys.stderr.isatty())
     overlay = None
     if args.overlay:
@@ -145,11 +201,14 @@ def run(args: argparse.Namespace) -> int:
         NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
         n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
         n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args),
-        overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, progress=progress,
+        overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, shapes=args.shapes,
+        progress=progress,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         estimator.fit(reference)
+    for line in notes:
+        print(f"cappe: {line}", file=sys.stderr)
     for w in caught:
         print(f"cappe: warning: {w.message}", file=sys.stderr)
     result = estimator.result_
@@ -188,9 +247,17 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
              f"validation position: {_where(result.validation_position, 'none held out')}"]
     lines += _parameter_rows(estimate, truth)
     lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
+    diag = estimate.diagnostics
+    if "uncertainty" in diag:
+        lines.append(f"uncertainty: {diag['uncertainty']['std']}; 95 % intervals on a log scale; residuals "
+                     f"weighted by {diag.get('weighting', 'the weights')}, {diag.get('shapes', 'complex')} shapes")
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())
+        if val.held.frf_source != "truth":
+            lines.append(f"  (FRAC and CSF from a modal synthesis over the {val.held.reference_frequency.size} "
+                         "reference modes, not from measured FRFs: modes outside the reference band and residual "
+                         "terms are left out)")
     pooled = val.identification_statistics()
     if pooled:
         lines += _row_stats("identification positions", pooled)
@@ -202,6 +269,7 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
     if not estimate.success:
         lines.append(f"not converged: {estimate.message}")
+    lines += [f"warning: {w.partition(': ')[2] or w}" for w in result.warnings]
     return "\n".join(lines)
 
 

@@ -79,6 +79,9 @@ class AutomatedSettings:
         True parameters (SI) of a simulated reference, for the validation FRFs.
     overlay : (str, str) or None
         Output and input channel of the FRF kept for overlays.
+    shapes : str
+        ``"real"`` or ``"complex"``: the shapes the exact-mode refinement compares (see
+        :class:`~cappe.estimate.AutomatedIdentification`).
     """
 
     n_gsa: int
@@ -95,12 +98,14 @@ class AutomatedSettings:
     n_permutations: int
     truth: Mapping[str, float] | None
     overlay: tuple[str, str] | None
+    shapes: str = "real"
 
     def to_dict(self) -> dict[str, Any]:
         return {"n_gsa": self.n_gsa, "n_opt": self.n_opt, "threshold": self.threshold,
                 "criteria": list(self.criteria), "weights": list(self.weights),
                 "residual_damping_threshold": self.residual_damping_threshold, "exact": self.exact,
-                "noise": None if self.noise is None else list(self.noise), "objective": SUBPROBLEM_OBJECTIVE}
+                "noise": None if self.noise is None else list(self.noise), "objective": SUBPROBLEM_OBJECTIVE,
+                "shapes": self.shapes}
 
 
 # -- step 1: global sensitivity -------------------------------------------------------------------------------

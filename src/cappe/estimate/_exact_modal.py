@@ -9,6 +9,7 @@ on closely spaced modes.
 
 from __future__ import annotations
 
+import math
 import threading
 from collections.abc import Sequence
 from typing import Any
@@ -23,10 +24,37 @@ from cappe.model import NumericModel
 from cappe.parallel import Executor
 from cappe.systems.modal import ModalData, ModalDataSet
 
-__all__ = ["ExactModalProblem"]
+__all__ = ["ExactModalProblem", "realized"]
 
 Array = NDArray[np.float64]
 CArray = NDArray[np.complex128]
+
+
+def realized(shapes: CArray) -> Array:
+    """Real mode shapes of complex ones: each turned by the phase that makes it as real as it can be, real part kept.
+
+    The phase is ``theta = arg(sum_i a_i^2) / 2``, which maximizes ``||Re(a exp(-i theta))||`` (the shape's
+    principal direction in the complex plane); the result is the shape's best real (normal-mode) approximation,
+    up to its sign. Components are along axis -2 (sensors), modes along the last axis.
+
+    Parameters
+    ----------
+    shapes : ndarray of complex, shape (..., n_sensors, n_modes)
+        Complex mode shapes, any scale.
+
+    Returns
+    -------
+    ndarray, shape (..., n_sensors, n_modes)
+        The realized shapes (same scale).
+
+    Examples
+    --------
+    >>> a = np.array([[1.0 + 1.0j], [2.0 + 2.0j]])
+    >>> np.round(realized(a) / np.sqrt(2), 12).ravel().tolist()
+    [1.0, 2.0]
+    """
+    theta = 0.5 * np.angle(np.sum(shapes * shapes, axis=-2, keepdims=True))
+    return np.asarray((shapes * np.exp(-1j * theta)).real, dtype=float)
 
 
 class ExactModalProblem:
@@ -59,6 +87,16 @@ class ExactModalProblem:
         ``weights`` by the noise standard deviations.
     executor : Executor, optional
         A ``"threads"`` executor evaluates the sets side by side; any other (or None) runs them serially.
+    shapes : {"complex", "real"}
+        ``"real"``: model and reference shapes are each realized (:func:`realized`) before the comparison, and
+        only the real shape residuals are kept: mode complexity that a rational LSCF/LSFD fit of measured FRFs
+        cannot reproduce (hysteretic damping ``K + iH``, whose mirrored poles are not complex conjugates) then
+        does not bias the estimates. Frequencies and damping ratios still come from the exact complex poles.
+    reference_std : bool
+        Weight by the reference's own standard deviations (``frequency_std``, ``damping_std``, ``shape_std`` of
+        every set) where the reference has them and ``noise`` is not given (default); the divisors are then
+        ``frequency_std / f``, ``damping_std / zeta`` and, per mode, the RMS over the sensors of ``shape_std /
+        sqrt(2)`` (the scatter of a real or imaginary part) over ``||x||`` (the target is scaled to unit norm).
     pairing : {"macxp", "mac"}
         Pairing criterion; MACXP falls back to the MAC in a set whose reference or model damping is zero (MACXP
         degenerates for undamped poles).
@@ -78,28 +116,51 @@ class ExactModalProblem:
 
     def __init__(self, model: NumericModel, space: ParameterSpace, reference: ModalData,
                  weights: tuple[float, float, float], noise: Sequence[float] | None = None,
-                 executor: Executor | None = None, *, pairing: str = "macxp", n_modes: int | None = None) -> None:
+                 executor: Executor | None = None, *, shapes: str = "complex", reference_std: bool = True,
+                 pairing: str = "macxp", n_modes: int | None = None) -> None:
         # the sets (positions) are independent: with a thread executor they are evaluated side by side (LAPACK
         # releases the GIL); elsewhere the problem's closures would be shipped for every evaluation, so serially
         self._runner = executor if executor is not None and executor.kind == "threads" else Executor("serial")
         self.model = model
         self.space = space
         self.reference = reference
+        if shapes not in ("complex", "real"):
+            msg = f"shapes must be 'complex' or 'real'; got {shapes!r}"
+            raise ValueError(msg)
+        self.shapes = shapes
         self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
         self.pairing = pairing
         self.engine = ModalEngine(model, sensors=list(reference.sensors), n_modes=n_modes)
         self.positions = [model.structure.resolve_position(s.position) for s in reference.sets]
-        self.targets = [s.shapes / np.linalg.norm(s.shapes, axis=0, keepdims=True) for s in reference.sets]
-        # residual divisors per set: (frequency, damping, shape per mode)
-        self.divisors: list[tuple[float, float, Array]] = []
-        for x in self.targets:
-            if noise is None:
+        raw = [s.shapes if shapes == "complex" else realized(s.shapes).astype(complex) for s in reference.sets]
+        norms = [np.linalg.norm(x, axis=0) for x in raw]
+        self.targets = [x / n[None, :] for x, n in zip(raw, norms, strict=True)]
+        # residual divisors per set and mode: (frequency, damping, shape), relative to the reference's values
+        self.divisors: list[tuple[Array, Array, Array]] = []
+        self.weighting = "weights" if noise is None else "noise"
+        with_std = reference_std and noise is None and all(
+            s.frequency_std is not None and s.damping_std is not None and s.shape_std is not None
+            and np.all(s.frequency_std > 0) and np.all(s.damping_std > 0) and np.all(s.shape_std > 0)
+            for s in reference.sets)
+        for data_set, x, n in zip(reference.sets, self.targets, norms, strict=True):
+            m = x.shape[1]
+            if with_std:
+                self.weighting = "reference standard deviations"
+                assert data_set.frequency_std is not None
+                assert data_set.damping_std is not None
+                assert data_set.shape_std is not None
+                # shape_std is the modulus of each component's complex deviation: each of its real and imaginary
+                # parts scatters by shape_std / sqrt(2); one divisor per mode, their RMS over the sensors
+                part_std = np.sqrt(np.mean(data_set.shape_std ** 2, axis=0) / 2)
+                div = (data_set.frequency_std / data_set.frequency, data_set.damping_std / data_set.damping,
+                       part_std / n)
+            elif noise is None:
                 w_f, w_z, w_s = self.sqrt_w
-                div = (1 / w_f if w_f > 0 else 0.0, 1 / w_z if w_z > 0 else 0.0,
-                       np.full(x.shape[1], 1 / w_s if w_s > 0 else 0.0))
+                div = (np.full(m, 1 / w_f if w_f > 0 else 0.0), np.full(m, 1 / w_z if w_z > 0 else 0.0),
+                       np.full(m, 1 / w_s if w_s > 0 else 0.0))
             else:
                 s_f, s_z, s_s = (float(v) for v in noise)
-                div = (s_f, s_z, s_s * np.max(np.abs(x), axis=0) / np.sqrt(2))
+                div = (np.full(m, s_f), np.full(m, s_z), s_s * np.max(np.abs(x), axis=0) / np.sqrt(2))
             self.divisors.append(div)
         self.evaluations = 0
         self._count_lock = threading.Lock()
@@ -122,19 +183,23 @@ class ExactModalProblem:
         f = w / (2 * np.pi)
         zeta = -lam.real / w
         a = shapes[:, :, index]  # (B, n_s, m)
+        if self.shapes == "real":
+            a = realized(a).astype(complex)
         x = self.targets[k]
         c = np.sum(a.conj() * x[None], axis=1)  # a^H x
         aa = np.sum(np.abs(a) ** 2, axis=1)
         e = a * (c / aa)[:, None, :] - x[None]
         d_f, d_z, d_s = self.divisors[k]
         parts = []
-        if d_f > 0:
+        if np.all(d_f > 0):
             parts.append((f - data_set.frequency) / data_set.frequency / d_f)
-        if d_z > 0:
+        if np.all(d_z > 0):
             parts.append((zeta - data_set.damping) / data_set.damping / d_z)
         if np.all(d_s > 0):
             e = e / d_s[None, None, :]
-            parts.extend([e.real.reshape(e.shape[0], -1), e.imag.reshape(e.shape[0], -1)])
+            parts.append(e.real.reshape(e.shape[0], -1))
+            if self.shapes == "complex":
+                parts.append(e.imag.reshape(e.shape[0], -1))
         return np.concatenate(parts, axis=1)
 
     def _evaluate(self, p: Array) -> tuple[Array, list[NDArray[np.intp]], list[CArray]]:
@@ -210,13 +275,21 @@ class ExactModalProblem:
         names = [self.model.parameter_names[c] for c in columns]
         d = exact_mode_derivatives(self.engine, full, self.positions[k], poles=paired, parameters=names)
         lam_r, a = d.poles, d.shapes  # a: (n_s, m) complex sensor shapes (any scale)
+        d_shapes = list(d.d_shapes)
+        if self.shapes == "real":  # the realized shape Re(a exp(-i theta)), theta = arg(sum a^2) / 2, and its change
+            theta = 0.5 * np.angle(np.sum(a * a, axis=0))
+            turn = np.exp(-1j * theta)[None, :]
+            total = np.sum(a * a, axis=0)
+            d_shapes = [((da - 1j * (0.5 * (2 * np.sum(a * da, axis=0) / total).imag)[None, :] * a) * turn).real
+                        .astype(complex) for da in d_shapes]
+            a = (a * turn).real.astype(complex)
         x = self.targets[k]
         c = np.sum(a.conj() * x, axis=0)  # a^H x per mode
         aa = np.sum(np.abs(a) ** 2, axis=0)
         w_abs = np.abs(lam_r)
         d_f, d_z, d_s = self.divisors[k]
         rows_f, rows_z, rows_re, rows_im = [], [], [], []
-        for d_lam, da in zip(d.d_poles, d.d_shapes, strict=True):  # per unknown
+        for d_lam, da in zip(d.d_poles, d_shapes, strict=True):  # per unknown
             d_abs = (lam_r.conj() * d_lam).real / w_abs
             rows_f.append(d_abs / (2 * np.pi) / data_set.frequency)
             d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
@@ -227,15 +300,117 @@ class ExactModalProblem:
             rows_re.append(de.real)
             rows_im.append(de.imag)
         parts = []
-        if d_f > 0:
-            parts.append(np.array(rows_f).T / d_f)  # (m, n_unknowns)
-        if d_z > 0:
-            parts.append(np.array(rows_z).T / d_z)
+        if np.all(d_f > 0):
+            parts.append(np.array(rows_f).T / d_f[:, None])  # (m, n_unknowns)
+        if np.all(d_z > 0):
+            parts.append(np.array(rows_z).T / d_z[:, None])
         if np.all(d_s > 0):
-            for stack in (rows_re, rows_im):
+            for stack in (rows_re, rows_im) if self.shapes == "complex" else (rows_re,):
                 de_all = np.array(stack) / d_s[None, None, :]  # (n_unknowns, n_s, m)
                 parts.append(de_all.reshape(len(columns), -1).T)
         return np.concatenate(parts, axis=0)
+
+    def _layout(self) -> tuple[NDArray[np.intp], NDArray[np.intp], Array, Array]:
+        """Per residual, in the order of :meth:`residuals`: its mode-position pair (a running index), its kind
+        (0 frequency, 1 damping, 2 shape), its divisor and its noise unit (1 for frequency and damping residuals,
+        ``max|x_r| / sqrt(2)`` for the components of shape r, the unit of the shape noise level)."""
+        groups, kinds, divisors, units = [], [], [], []
+        start = 0
+        for data_set, x, (d_f, d_z, d_s) in zip(self.reference.sets, self.targets, self.divisors, strict=True):
+            m, n_s = data_set.n_modes, len(self.reference.sensors)
+            modes = start + np.arange(m)
+            unit = np.max(np.abs(x), axis=0) / np.sqrt(2)
+            for kind, d in ((0, d_f), (1, d_z)):
+                if np.all(d > 0):
+                    groups.append(modes)
+                    kinds.append(np.full(m, kind))
+                    divisors.append(d)
+                    units.append(np.ones(m))
+            if np.all(d_s > 0):
+                for _ in range(2 if self.shapes == "complex" else 1):
+                    groups.append(np.tile(modes, n_s))  # (n_s, m) flattened row-major: mode = index % m
+                    kinds.append(np.full(m * n_s, 2))
+                    divisors.append(np.tile(d_s, n_s))
+                    units.append(np.tile(unit, n_s))
+            start += m
+        return (np.concatenate(groups).astype(np.intp), np.concatenate(kinds).astype(np.intp),
+                np.concatenate(divisors), np.concatenate(units))
+
+    def groups(self) -> NDArray[np.intp]:
+        """The mode-position pair of every residual (a running index over sets and their modes), in the order of
+        :meth:`residuals`: the clusters of a cluster-robust covariance, since one mode's frequency, damping and
+        shape errors share their causes (its extraction, its modelling).
+
+        Returns
+        -------
+        ndarray of int, shape (n_r,)
+        """
+        return self._layout()[0]
+
+    def scatter(self, p: Array) -> tuple[float, float, float]:
+        """The residuals' own noise levels at ``p``: the rms relative frequency and damping errors, and the rms
+        shape-component error in units of each mode's largest component over sqrt(2) (the ``noise`` convention).
+
+        Parameters
+        ----------
+        p : ndarray, shape (space.n,)
+            The unknowns in SI units (a fitted estimate).
+
+        Returns
+        -------
+        (float, float, float)
+            ``(s_f, s_z, s_s)``, usable as ``noise``; NaN for a kind without residuals.
+        """
+        _, kinds, divisors, units = self._layout()
+        raw = self.residuals(p) * divisors / units
+        return tuple(float(np.sqrt(np.mean(raw[kinds == k] ** 2))) if np.any(kinds == k) else math.nan
+                     for k in range(3))  # type: ignore[return-value]
+
+    def reweight(self, p: Array) -> dict[str, float] | None:
+        """Divide the residuals by their own scatter at ``p`` (a fitted estimate) from now on: every mode's shape
+        components by their rms, and its relative frequency and damping errors by a level per kind times the
+        mode's quality ``q_r`` (its shape scatter over the median mode's; one residual per mode cannot give its
+        own scatter, and a mode that an extraction got poorly, overlapped, weakly excited or heavily damped, is
+        poor in all three). The levels ``c_f``, ``c_z`` make the mean square of ``e_r / (c q_r)`` one per kind.
+
+        Parameters
+        ----------
+        p : ndarray, shape (space.n,)
+            The unknowns in SI units.
+
+        Returns
+        -------
+        dict or None
+            ``frequency``, ``damping`` (the levels ``c_f``, ``c_z``) and ``shape_min``, ``shape_median``,
+            ``shape_max`` (the modes' shape scatter, in units of their largest component); None, with the
+            divisors unchanged, where a kind is weighted zero or some mode has no scatter (an exact reference).
+        """
+        groups, kinds, divisors, units = self._layout()
+        if not all(np.any(kinds == k) for k in range(3)):
+            return None
+        raw = self.residuals(p) * divisors / units
+        n_modes = [data_set.n_modes for data_set in self.reference.sets]
+        total = int(sum(n_modes))
+        shape = np.array([np.sqrt(np.mean(raw[(groups == g) & (kinds == 2)] ** 2)) for g in range(total)])
+        if not np.all(np.isfinite(shape) & (shape > 1e-12)):
+            return None
+        quality = shape / np.median(shape)
+        e_f = raw[kinds == 0]  # one per mode, in mode order
+        e_z = raw[kinds == 1]
+        c_f = float(np.sqrt(np.mean((e_f / quality) ** 2)))
+        c_z = float(np.sqrt(np.mean((e_z / quality) ** 2)))
+        if not (c_f > 0 and c_z > 0):
+            return None
+        new = []
+        start = 0
+        for x, m in zip(self.targets, n_modes, strict=True):
+            q, s_r = quality[start:start + m], shape[start:start + m]
+            new.append((c_f * q, c_z * q, s_r * np.max(np.abs(x), axis=0) / np.sqrt(2)))
+            start += m
+        self.divisors = new
+        self._cache = {}
+        return {"frequency": c_f, "damping": c_z, "shape_min": float(shape.min()),
+                "shape_median": float(np.median(shape)), "shape_max": float(shape.max())}
 
     def pairing_report(self, p: Array) -> list[dict[str, Any]]:
         """Per set: the model mode paired with each reference mode at ``p``.

@@ -20,9 +20,11 @@ two FRF sets, stated in ``frf_source``:
   true and at the identified parameters (all modes, viscous, hysteretic and gyroscopic terms);
 - ``"modal synthesis"`` (no truth): both are modal sums over the reference modes,
   ``H_jk = sum_r psi_jr psi_kr / (omega_r^2 - omega^2 + 2 i zeta_r omega_r omega)``, with the reference's shapes
-  (which must be mass-normalized, as ``cappe simulate`` writes them) and with the paired model modes (exact
-  complex modes with ``exact``, else the first-order ones), frequency ``|lambda| / 2 pi`` and damping ratio
-  ``-Re lambda / |lambda|``.
+  and with the paired model modes (exact complex modes with ``exact``, else the first-order ones), frequency
+  ``|lambda| / 2 pi`` and damping ratio ``-Re lambda / |lambda|``. The reference's shapes must be mass-normalized
+  (as ``cappe simulate`` writes them); where they are not (an extraction without driving points), each is scaled
+  to its model partner's modal mass and ``notes`` says so: the criteria then test poles and shapes only. A modal
+  synthesis leaves out the modes outside the reference's band and the residual terms of measured FRFs.
 
 FRFs whose reference power ``sum_f |H|^2`` is below ``1e-10`` of the largest (zero by symmetry: an x force on a
 symmetric structure seen in y) are left out (NaN), as FRAC and CSF of numerical noise mean nothing.
@@ -90,6 +92,8 @@ class ValidationResult:
     overlay : dict
         One FRF for plots: ``output``, ``input`` (the driving point with the largest response) and the arrays
         ``reference`` and ``model`` (complex, shape (n_freq,), m/N).
+    notes : tuple of str
+        What a user must know to read the FRF criteria (e.g. reference shapes that are not mass-normalized).
     """
 
     position: dict[str, float]
@@ -107,6 +111,7 @@ class ValidationResult:
     csf: Array
     frf_source: str
     overlay: Mapping[str, Any]
+    notes: tuple[str, ...] = ()
 
     def values(self, criterion: str) -> Array:
         """The finite values of one criterion (``frac``, ``csf``, ``macxp``, ``ndd``, ``nfd``), flattened.
@@ -355,6 +360,29 @@ def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, o
     return np.asarray(np.einsum("jr,kr,fr->fjk", a, b, 1.0 / den), dtype=complex)
 
 
+#: Reference shapes whose modal scale factor against the paired mass-normalized model shapes lies outside
+#: [1 / MASS_NORMALIZED_FACTOR, MASS_NORMALIZED_FACTOR] are taken as not mass-normalized.
+MASS_NORMALIZED_FACTOR = 1.5
+
+
+def _scaled_reference(data_set: ModalDataSet, model_shapes: CArray) -> tuple[CArray, tuple[str, ...]]:
+    """Reference shapes for a modal synthesis: as they are when they are mass-normalized (their modal scale factor
+    against the paired model shapes within a factor 1.5 of 1), else each scaled to its model partner's modal mass
+    (complex modal scale factor), with a note saying so."""
+    x = data_set.shapes
+    msf = np.sum(x.conj() * model_shapes, axis=0) / np.sum(np.abs(x) ** 2, axis=0)  # model ~ msf * reference
+    size = np.abs(msf)
+    off = (size > MASS_NORMALIZED_FACTOR) | (size < 1 / MASS_NORMALIZED_FACTOR)
+    if not np.any(off):
+        return x, ()
+    worst = float(np.max(np.maximum(size, 1 / size)))
+    note = (f"reference shapes at {data_set.position} are not mass-normalized ({int(off.sum())} of "
+            f"{data_set.n_modes} modes off by a factor up to {worst:.3g}): FRAC and CSF use them scaled to the "
+            "model's modal masses, so they test poles and shapes but not modal masses (give driving points to "
+            "extract-modes, or validate against measured FRFs)")
+    return x * msf[None, :], (note,)
+
+
 def _pair(model_shapes: CArray, model_poles: CArray, data_set: ModalDataSet,
           criterion: str = "macxp") -> tuple[NDArray[np.intp], Array]:
     """One-to-one pairing by MACXP (or ``criterion="mac"``: shapes alone), maximal total
@@ -461,6 +489,7 @@ def validate_identification(
         msg = f"FRF input channels {unknown} are not reference sensor channels {sensors}"
         raise DataError(msg)
     in_idx = [sensors.index(c) for c in channels_in]
+    notes: tuple[str, ...] = ()
     if truth is not None:
         t = nm.vector(truth if isinstance(truth, Mapping) else np.asarray(truth, dtype=float))
         h_ref = _truth_receptance(nm, t.tobytes(), tuple(pos.items()), f_grid.tobytes(), tuple(sensors),
@@ -468,7 +497,8 @@ def validate_identification(
         h_mod = _receptance_lines(nm, p, pos, f_grid, sensors, channels_in)
         source = "truth"
     else:
-        h_ref = _synthesis(data_set.shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)), in_idx)
+        ref_shapes, notes = _scaled_reference(data_set, shapes[:, model_of])
+        h_ref = _synthesis(ref_shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)), in_idx)
         h_mod = _synthesis(shapes[:, model_of], f_model, zeta_model, f_grid, range(len(sensors)), in_idx)
         source = "modal synthesis"
     frac_v, csf_v = _line_criteria(h_mod, h_ref)
@@ -487,5 +517,5 @@ def validate_identification(
         position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
         model_frequency=f_model, macxp=values, nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,
         outputs=tuple(sensors), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
-        overlay=kept,
+        overlay=kept, notes=notes,
     )

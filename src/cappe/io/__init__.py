@@ -1,5 +1,5 @@
 """File contracts: JSON parameter files, modal data (cappe.modal/1), time data and FRFs (UFF 58, CSV, npz), UFF 55
-modes and UFF 15/2411 nodes, all written atomically."""
+modes and UFF 15/2411 nodes, all written atomically; sensor maps (``channel,sensor`` CSV)."""
 
 from cappe.io.files import read_parameters, write_json, write_text
 from cappe.io.lvm import read_lvm_time_data
@@ -22,6 +22,7 @@ from cappe.io.modal import (
     read_modal_data,
     write_modal_data,
 )
+from cappe.io.sensor_map import apply_sensor_map, channel_sign, map_channels, map_modal_data, read_sensor_map
 from cappe.io.uff import (
     UFF_FORMAT,
     read_uff_frf,
@@ -44,7 +45,11 @@ __all__ = [
     "ModalData",
     "ModalDataSet",
     "TimeData",
+    "apply_sensor_map",
+    "channel_sign",
     "check_clipping",
+    "map_channels",
+    "map_modal_data",
     "match_channels",
     "modal_data_from_mapping",
     "read_frf",
@@ -52,6 +57,7 @@ __all__ = [
     "read_measurements",
     "read_modal_data",
     "read_parameters",
+    "read_sensor_map",
     "read_time_data",
     "read_uff_frf",
     "read_uff_modal",

@@ -10,9 +10,10 @@
               ...]}
 
 ``shape_im`` may be omitted for real shapes. The standard deviations are optional (written by ``cappe
-extract-modes``, estimated from the measured data); each is >= 0. The data types, :class:`~cappe.systems.ModalData` and
-:class:`~cappe.systems.ModalDataSet`, live in :mod:`cappe.systems.modal`; this module reads, validates and writes
-them (and hands them on under their old names, ``cappe.io.modal.ModalData``).
+extract-modes``, estimated from the measured data); each is >= 0; ``cappe identify`` weights its residuals by them.
+The data types, :class:`~cappe.systems.ModalData` and :class:`~cappe.systems.ModalDataSet`, live in
+:mod:`cappe.systems.modal`; this module reads, validates and writes them (and hands them on under their old names,
+``cappe.io.modal.ModalData``).
 """
 
 from __future__ import annotations
