@@ -293,7 +293,7 @@ class ExactModalProblem:
             d_abs = (lam_r.conj() * d_lam).real / w_abs
             rows_f.append(d_abs / (2 * np.pi) / data_set.frequency)
             d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
-            rows_z.append(d_zeta / data_set.damping if d_z > 0 else d_zeta)  # (an undamped reference: unused)
+            rows_z.append(d_zeta / data_set.damping if np.all(d_z > 0) else d_zeta)  # (an undamped reference: unused)
             dc = np.sum(da.conj() * x, axis=0)
             daa = 2 * np.sum((a.conj() * da).real, axis=0)
             de = da * (c / aa)[None, :] + a * (dc / aa)[None, :] - a * (c * daa / aa**2)[None, :]
