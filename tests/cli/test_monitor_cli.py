@@ -457,3 +457,20 @@ def test_a_third_party_uff_is_ingested_through_a_sensor_map(monitored: Path, cap
     mine = table[table["measurement_id"].map(sources) == str(monitored / "fault/m00002.uff")]
     for name, value in zip(mine["parameter"], mine["value"], strict=True):
         assert doc["factors"][name] == pytest.approx(value, rel=1e-6)
+
+
+def test_status_states_the_detectable_change(monitored: Path, capsys) -> None:
+    code, out, _ = run(capsys, "monitor", "status", monitored / "store.db")
+    assert code == 0
+    line = next(x for x in out.splitlines() if "detectable:" in x)
+    assert re.search(r"detectable: a change of front [0-9.e-]+ %, rear .* is found after about [0-9.]+ "
+                     r"measurement\(s\) \(2 standard deviations of the healthy scatter, resolution [0-9.e-]+ %\)", line)
+    code, out, _ = run(capsys, "monitor", "status", monitored / "store.db", "--json")
+    det = json.loads(out)["machines"][0]["detectable"]
+    with HistoryStore(monitored / "store.db") as history:
+        from cappe.monitor import Baseline
+
+        baseline = Baseline.from_dict(history.baseline("spindle-01"))
+    # two chart standard deviations of the baseline: sqrt(std^2 + resolution^2), as a relative loss
+    assert det["change"]["front"] == pytest.approx(-np.expm1(-2 * baseline.scale[0]))
+    assert det["resolution"] == baseline.resolution < 0.005  # derived, below the old fixed 0.5 %

@@ -528,8 +528,11 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
     doc = store.baseline(machine)
     detectable = None
     if doc is not None:
-        detectable = detectable_change(MonitorConfig.from_dict(store.machine_config(machine)),
-                                       Baseline.from_dict(doc))
+        try:
+            detectable = detectable_change(MonitorConfig.from_dict(store.machine_config(machine)),
+                                           Baseline.from_dict(doc))
+        except DataError:  # a config or baseline another program wrote: the status stands without it
+            detectable = None
     return {"machine": machine, "measurements": store.counts(machine)["measurements"],
             "latest": None if latest is None else latest.to_dict(), "factors": factors,
             "baseline": doc is not None, "detectable": detectable,

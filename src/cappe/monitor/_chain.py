@@ -543,8 +543,9 @@ class Monitor:
         for signal in signals:
             # which fault: from the mean change since the change point (averages the noise of the run); how
             # large: from this measurement's deviation along that fault (a drifting fault has grown since)
-            chosen = diagnose(signal.change, baseline.chart_covariance / signal.change_weight, list(hyps.values()))
-            now = diagnose(deviation, baseline.chart_covariance, [hyps[chosen.hypothesis]])
+            chosen = diagnose(signal.change, baseline.diagnosis_covariance / signal.change_weight,
+                              list(hyps.values()))
+            now = diagnose(deviation, baseline.diagnosis_covariance, [hyps[chosen.hypothesis]])
             diagnosis = replace(chosen, change=now.change, change_std=now.change_std, severity=now.severity)
             held = best.get(diagnosis.hypothesis)
             if held is None or signal.statistic > held[0].statistic:
