@@ -267,7 +267,7 @@ def ingest(args: argparse.Namespace) -> int:
                 before = _recorded(store, machine, path, when)
                 result = run_ingest(store, machine, read_measurements(path), timestamp=when, source=str(path),
                                     conditions=conds, monitor=monitor)
-                results.append({"file": str(path), **result.to_dict()})
+                results.append({"file": str(path), "timestamp": when.isoformat(), **result.to_dict()})
             except BaseException as exc:
                 progress.close()
                 after = None if before is None else _recorded(store, machine, path, when, failed=True)
