@@ -374,3 +374,20 @@ def test_model_show_refuses_a_position_it_would_ignore(tmp_path, capsys):
     assert code == 2
     assert "--position has no effect here" in err
     assert run(capsys, "model", "modes", model, "--position", "z=0.3")[0] == 0
+
+
+def test_options_of_the_other_mode_are_refused_not_ignored(tmp_path, capsys):
+    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--local", "--seed", "3", "--threshold", "0.1")
+    assert code == 2
+    assert "--seed, --threshold apply to --sobol only" in err
+    code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", "x.json",
+                       "--percent", "5")
+    assert code == 2
+    assert "--percent applies to --local only" in err
+    data = tmp_path / "run.npz"
+    assert main(["simulate", "builtin:two-mass-rig", "--excite", "F1=random", "--fs", "512", "--duration", "1",
+                 "--outputs", "d1", "--seed", "1", "-o", str(data)]) == 0
+    capsys.readouterr()
+    code, _, err = run(capsys, "fit", data, "--inputs", "F1", "--output", "d1", "--order", "4", "--criterion", "bic")
+    assert code == 2
+    assert "--criterion and --max-order choose the order with --order auto" in err
