@@ -304,7 +304,7 @@ def ingest(args: argparse.Namespace) -> int:
                 result = run_ingest(store, machine, data, timestamp=when, source=str(path),
                                     conditions=conds, monitor=monitor, digest=digest)
                 known.add(result.measurement_id, str(path), digest)
-                results.append({"file": str(path), **result.to_dict()})
+                results.append({"file": str(path), "timestamp": when.isoformat(), **result.to_dict()})
             except BaseException as exc:
                 progress.close()
                 after = None if before is None else _recorded(store, machine, path, when, failed=True)

@@ -25,8 +25,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--structure", choices=STRUCTURES, default="arx", help="model structure (default arx)")
     p.add_argument("--order", default="auto",
                    help="model order n (every polynomial of the structure has order n), or 'auto' (default)")
-    p.add_argument("--criterion", choices=["aic", "bic", "fpe"], default="aic", help="--order auto: criterion")
-    p.add_argument("--max-order", type=int, default=12, help="--order auto: largest candidate order (default 12)")
+    p.add_argument("--criterion", choices=["aic", "bic", "fpe"], help="--order auto: criterion (default aic)")
+    p.add_argument("--max-order", type=int, help="--order auto: largest candidate order (default 12)")
     p.add_argument("--nk", type=int, default=1, help="input delay in samples (default 1)")
     p.add_argument("--prune", metavar="N|auto",
                    help="prune to N modes (thesis rules, then the N most significant), or 'auto' (rules and a 1 %% "
@@ -61,6 +61,9 @@ def run(args: argparse.Namespace) -> int:
 
     inputs = channels(args.inputs, "--inputs")
     n = _count_or_auto(args.order, "--order", "a positive integer")
+    if n is not None and (args.criterion is not None or args.max_order is not None):
+        msg = "--criterion and --max-order choose the order with --order auto; with --order N they do nothing"
+        raise UsageError(msg)
     prune_to = _count_or_auto(args.prune, "--prune", "a positive number of modes")
     if (args.refine or args.plot or args.cutoff is not None) and args.prune is None:
         msg = "--refine, --plot and --cutoff act on a pruned model; add --prune N or --prune auto"
@@ -70,7 +73,8 @@ def run(args: argparse.Namespace) -> int:
         warnings.simplefilter("always")
         fit = fit_black_box(
             data, inputs=inputs, output=args.output, structure=args.structure,
-            order="auto" if n is None else n, criterion=args.criterion, max_order=args.max_order, nk=args.nk,
+            order="auto" if n is None else n, criterion=args.criterion or "aic",
+            max_order=12 if args.max_order is None else args.max_order, nk=args.nk,
             prune=None if args.prune is None else ("auto" if prune_to is None else prune_to),
             cutoff=args.cutoff, max_damping=args.max_damping, refine=args.refine,
         )

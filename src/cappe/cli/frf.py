@@ -21,7 +21,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     add_deprecated(p, "--output", dest="outputs", instead="--outputs A,B", join=True, nargs="+", metavar="CH")
     p.add_argument("--estimator", choices=["H1", "H2", "Hv"], default="H1", help="FRF estimator (default H1)")
     p.add_argument("--nperseg", type=int, help="samples per segment (line spacing fs/nperseg); default 8 averages")
-    p.add_argument("--overlap", type=float, default=0.5, help="segment overlap fraction (default 0.5)")
+    p.add_argument("--overlap", type=float,
+                   help="with --nperseg: segment overlap fraction (default 0.5; without --nperseg, 8 averages at 0.5)")
     p.add_argument("--window", default=None, help="segment window, e.g. hann, hamming, boxcar (default hann)")
     p.add_argument("--impact", action="store_true", help="impact test: one record per hit, force window")
     p.add_argument("--exp-window", metavar="TAU", help="impact: exponential window time constant in s, or auto/none")
@@ -50,7 +51,12 @@ def run(args: argparse.Namespace) -> int:
             except ValueError as exc:
                 msg = f"--exp-window must be a time constant in s, 'auto' or 'none'; got {args.exp_window!r}"
                 raise UsageError(msg) from exc
-    noverlap = int(args.overlap * args.nperseg) if args.nperseg else None
+    if args.overlap is not None and (args.impact or not args.nperseg):
+        # the default segmentation (8 averages at 50 %) and the impact records (one per hit) take no overlap
+        msg = ("--overlap does not apply to --impact (one record per hit)" if args.impact else
+               "--overlap needs --nperseg (without it the record is cut into 8 averages at 50 % overlap)")
+        raise UsageError(msg)
+    noverlap = int(args.overlap * args.nperseg) if args.overlap is not None else None
     lo_hi = band(args.band) if args.band else None
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

@@ -142,6 +142,10 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
 @_with_model
 def show(args: argparse.Namespace, ctx: ModelContext) -> int:
     s = ctx.structure
+    if args.position:  # parsed with the other model options, and nothing here depends on it
+        msg = ("model show describes the model at every axis position; --position has no effect here (it applies to "
+               "matrices, modes, tf, zpk, ss, frf and check)")
+        raise UsageError(msg)
     data = {
         "name": s.name,
         "n_dof": s.n_dof,

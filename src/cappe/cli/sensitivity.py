@@ -20,23 +20,38 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     mode = p.add_mutually_exclusive_group(required=True)
     mode.add_argument("--local", action="store_true", help="percentage table and normalized derivatives")
     mode.add_argument("--sobol", action="store_true", help="Sobol indices per reference mode, position, criterion")
-    p.add_argument("--percent", type=float, default=10.0, help="--local: size of the parameter changes (default 10)")
+    p.add_argument("--percent", type=float, help="--local: size of the parameter changes (default 10)")
     p.add_argument("--reference", metavar="FILE.json", help="--sobol: reference modes (cappe.modal/1)")
-    p.add_argument("--n-gsa", type=int, default=1024, metavar="N",
+    p.add_argument("--n-gsa", type=int, metavar="N",
                    help="--sobol: Sobol base sample size, a power of two (default 1024; as in cappe identify)")
     add_deprecated(p, "--n", dest="n_gsa", instead="--n-gsa", type=int, metavar="N")
     p.add_argument("--progress", action="store_true", help="--sobol: progress bar even when stderr is not a terminal")
-    p.add_argument("--seed", type=int, default=0, help="--sobol: random seed (default 0)")
+    p.add_argument("--seed", type=int, help="--sobol: random seed (default 0)")
     p.add_argument("--parameters", metavar="LIST",
                    help="comma-separated parameters (default: all for --local, the unknown ones for --sobol)")
-    p.add_argument("--criteria", metavar="LIST", default="macxp,ndd2,frequency,damping",
+    p.add_argument("--criteria", metavar="LIST",
                    help="--sobol: outputs per mode (default macxp,ndd2,frequency,damping)")
-    p.add_argument("--threshold", type=float, default=0.01, help="--sobol: significance threshold on ST (default 0.01)")
+    p.add_argument("--threshold", type=float, help="--sobol: significance threshold on ST (default 0.01)")
     p.add_argument("--plot", metavar="FILE.png", help="--sobol: S1/ST bar plot of the first outputs")
     p.set_defaults(func=run)
 
 
+#: The options of one mode, with their defaults (None on the command line: not given).
+LOCAL_OPTIONS = {"percent": 10.0}
+SOBOL_OPTIONS = {"reference": None, "n_gsa": 1024, "seed": 0, "criteria": "macxp,ndd2,frequency,damping",
+                 "threshold": 0.01, "plot": None, "progress": False}
+
+
 def run(args: argparse.Namespace) -> int:
+    own, other, mode = (LOCAL_OPTIONS, SOBOL_OPTIONS, "--sobol") if args.local else (SOBOL_OPTIONS, LOCAL_OPTIONS,
+                                                                                       "--local")
+    foreign = [f"--{dest.replace('_', '-')}" for dest in other if getattr(args, dest) not in (None, False)]
+    if foreign:  # parsed and then ignored before: say so instead
+        msg = f"{', '.join(foreign)} {'applies' if len(foreign) == 1 else 'apply'} to {mode} only"
+        raise UsageError(msg)
+    for dest, default in own.items():
+        if getattr(args, dest) is None:
+            setattr(args, dest, default)
     ctx = ModelContext(args)
     if args.local:
         return _local(ctx, args)

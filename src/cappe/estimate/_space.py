@@ -248,8 +248,8 @@ class ParameterSpace:
         Examples
         --------
         >>> from cappe.model import load_model
-        >>> space = ParameterSpace.from_model(load_model("builtin:two-mass-rig"), ["k11"], bounds={"k11": (1e5, 1e6)})
-        >>> bool(1e5 <= space.sample(0)[0] <= 1e6)
+        >>> space = ParameterSpace.from_model(load_model("builtin:two-mass-rig"), ["k11"], bounds={"k11": (1e5, 1e7)})
+        >>> bool(1e5 <= space.sample(0)[0] <= 1e7)
         True
         """
         open_ = [n for n, lo, hi in zip(self.names, self.lower, self.upper, strict=True)

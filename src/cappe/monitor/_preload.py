@@ -219,7 +219,7 @@ def sensor_visibility(frf: FRFData, mode_frequencies: Sequence[float], *, bandwi
     Returns
     -------
     ndarray, shape (n_out, n_in, m)
-        Levels in dB (<= 0).
+        Levels in dB (<= 0; -inf where the output does not respond at the mode at all).
     """
     f = np.asarray(frf.freq, dtype=float)
     levels = []
@@ -231,4 +231,5 @@ def sensor_visibility(frf: FRFData, mode_frequencies: Sequence[float], *, bandwi
         levels.append(np.max(np.abs(frf.H[:, :, near]), axis=-1))
     peak = np.stack(levels, axis=-1)  # (n_out, n_in, m)
     strongest = np.max(peak, axis=-1, keepdims=True)
-    return np.asarray(20 * np.log10(peak / np.where(strongest > 0, strongest, 1.0)), dtype=float)
+    with np.errstate(divide="ignore"):  # an output that does not see a mode at all: -inf dB, not a warning
+        return np.asarray(20 * np.log10(peak / np.where(strongest > 0, strongest, 1.0)), dtype=float)
