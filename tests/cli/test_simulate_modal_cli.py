@@ -185,7 +185,7 @@ def test_frf_band_defaults_and_model_outputs(capsys, files, tmp_path):
     ],
 )
 def test_errors(capsys, files, tmp_path, argv, code, message):
-    ref_file = tmp_path / "ref.json"
+    ref_file = tmp_path / ("ref.npz" if "--excite" in argv else "ref.json")  # -o of what the command writes
     got, _, err = simulate(capsys, files, *argv, "-o", ref_file)
     assert got == code, err
     assert message in err

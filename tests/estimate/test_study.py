@@ -64,14 +64,14 @@ def test_study_data_are_simulated_at_the_position(carriage):
 
 
 def test_study_estimates_at_the_position_it_simulates(carriage):
-    # one-step-frf takes a position: data and model both at y = 0.2, noise-free
-    result = simulation_study(model=carriage, method="one-step-frf", truth={"k": 2.0e6}, unknowns=["k"],
-                              noise_levels=[0.0], seeds=[0], duration=8.0, position={"y": 0.2})
+    # one-step takes a position: data and model both at y = 0.2, noise-free (the FRF-based one-step-frf fails its
+    # residual runs test on the study's H1 FRFs of a short random record: their leakage bias is not noise)
+    result = simulation_study(model=carriage, method="one-step", truth={"k": 2.0e6}, unknowns=["k"],
+                              noise_levels=[0.0], seeds=[0], duration=2.0, position={"y": 0.2})
     assert result.position == {"y": 0.2}
     assert result.to_dict()["position"] == {"y": 0.2}
     assert bool(result.success[0, 0])
-    # measured -4.2 %: the H1 estimate of an 8 s random record (leakage at the lightly damped peak), not position
-    assert result.estimates[0, 0, 0] == pytest.approx(2.0e6, rel=0.06)
+    assert result.estimates[0, 0, 0] == pytest.approx(2.0e6, rel=1e-4)
 
 
 def test_modal_methods_refuse_a_position(carriage):
