@@ -7,7 +7,9 @@ without a case here, or without a stated reason in ``EXEMPT``, fails it.
 
 The data files are made once per module: the README's sled, a carriage of our own whose dynamics depend on the axis
 position (the sled's do not: its table and shoe move together), the two-mass rig's modes, time records, FRFs, a
-monitoring store, and a static bearing test written from the rigid-shaft lever rule with numpy.
+monitoring store, and a static bearing test written from the rigid-shaft lever rule with numpy. A command line
+that several cases share (a base) runs once per module. The demo's identification and monitoring stages take
+minutes: those cases are ``extended``, each naming the faster test of the same contract.
 """
 
 from __future__ import annotations
@@ -691,7 +693,7 @@ def _expand(argv: list[str], folder: Path) -> list[str]:
     return [a.replace("{w}", str(folder)).replace("FIRST", day3[0]).replace("LAST", day3[-1]) for a in argv]
 
 
-@pytest.mark.slow  # about 300 command runs: 5 min on an idle 2-core machine, three times that on a busy one
+@pytest.mark.slow  # about 500 command runs (shared bases run once): 3.5 min with -n 2 on a busy 2-core machine
 @pytest.mark.parametrize(("command", "option", "base", "variant", "fails"), CASES)
 def test_option_changes_the_effect(world: Path, capsys: pytest.CaptureFixture[str], monkeypatch: pytest.MonkeyPatch,
                                    command: str, option: str, base: list[str], variant: list[str],
