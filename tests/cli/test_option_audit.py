@@ -677,8 +677,9 @@ EXEMPT = {
     ("monitor watch", "store"): "the store is the data every monitor case reads",
     ("monitor watch", "--once"): "without it the watch runs until it is stopped: tests/cli/test_monitor_cli.py::"
                                  "test_watch_survives_a_kill_and_a_restart_mid_folder kills such a watch",
-    ("plan-test", "--position"): "fixes only axes the plan does not choose (the carriage has one axis, which the plan "
-                                 "chooses): NOT covered; with candidates on every axis it is ignored without a word",
+    ("plan-test", "--position"): "fixes only axes the plan does not choose, and is refused on an axis it chooses: "
+                                 "tests/cli/test_plan_test_cli.py::test_plan_test_bad_input (the carriage has one "
+                                 "axis, which the plan chooses)",
     ("monitor serve", "store"): "serve blocks; tests/cli/test_monitor_cli.py::test_serve_answers serves a store",
     ("monitor serve", "--port"): "test_serve_answers asks for port 0 and reads the port it got",
     ("monitor serve", "--allowed-host"): "test_serve_answers checks the hosts it answers and the one it refuses",

@@ -64,6 +64,11 @@ def test_plan_test_bad_input(capsys):
                        "--noise-shape", "0")
     assert code == 2
     assert "noise levels must be > 0" in err
+    # --position on an axis the plan chooses was dropped without a word (the option audit found it)
+    code, _, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 1, "--n-sensors", 2,
+                       "--position", "z=0.1")
+    assert code == 2
+    assert "--position fixes z, which the plan chooses" in err
 
 
 def test_grid_candidates_span_the_listed_range(capsys):

@@ -84,6 +84,11 @@ def _candidate_positions(args: argparse.Namespace, structure: Any, base: dict[st
                 values.setdefault(axis, []).append(number)
     else:
         values = {name: list(a.positions) for name, a in axes.items() if a.positions}
+    chosen = sorted(set(number_pairs(args.position, "--position")) & set(values))
+    if chosen:  # the plan picks these axes' values itself: a fixed --position there would be dropped
+        msg = (f"--position fixes {', '.join(chosen)}, which the plan chooses among its candidate positions; to "
+               f"measure at one value, give it as the only candidate (--candidate-positions {chosen[0]}=V)")
+        raise UsageError(msg)
     order = [a for a in structure.axis_names if a in values]
     combos = itertools.product(*(values[a] for a in order))
     return [{**base, **dict(zip(order, combo, strict=True))} for combo in combos]
