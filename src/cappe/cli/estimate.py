@@ -94,11 +94,23 @@ def _kind(data: Any) -> str:
     return type(data).__name__
 
 
+def _landscape(option: str) -> tuple[list[str], str]:
+    """The two parameters and the file of ``--plot-landscape A,B:FILE.png``."""
+    pair, sep, target = option.partition(":")
+    axes = names(pair) or []
+    if not sep or not target or len(axes) != 2:
+        msg = f"--plot-landscape must look like A,B:FILE.png; got {option!r}"
+        raise UsageError(msg)
+    return axes, target
+
+
 @naming_file("data")
 def run(args: argparse.Namespace) -> int:
     from cappe.estimate._registry import METHODS, estimator_class
     from cappe.io import read_parameters
 
+    if args.plot_landscape:
+        _landscape(args.plot_landscape)  # a usage error before the fit, not after it
     ctx = ModelContext(args)
     data = load_data(args.data)
     wanted = METHODS[args.method][2]
@@ -155,11 +167,7 @@ def run(args: argparse.Namespace) -> int:
         _plot(result, args.plot)
         doc["diagnostics"]["plot"] = args.plot
     if args.plot_landscape:
-        pair, sep, target = args.plot_landscape.partition(":")
-        axes = names(pair) or []
-        if not sep or not target or len(axes) != 2:
-            msg = f"--plot-landscape must look like A,B:FILE.png; got {args.plot_landscape!r}"
-            raise UsageError(msg)
+        axes, target = _landscape(args.plot_landscape)
         estimator.cost_slice(axes).plot(target, title=f"{result.method}: cost over {axes[0]} and {axes[1]}")
         doc["diagnostics"]["plot_landscape"] = target
     if args.plot_response:
