@@ -73,3 +73,10 @@ def test_modal_data():
     assert data.sensors == ("t:z", "b:x")
     np.testing.assert_array_equal(data.sets[0].shapes[:, 0], [-1.0, 2.0])
     assert notes
+
+
+def test_modal_data_with_two_sensors_mapped_to_one_channel_is_refused():
+    # modal shapes used to keep both rows under one name, which a later pairing then read as one sensor
+    s = ModalDataSet({"z": 0.1}, np.array([10.0]), np.array([0.01]), np.array([[1.0 + 0j], [2.0 + 0j]]))
+    with pytest.raises(DataError, match=r"sensor map \(m\.csv\): \['t:z'\] are each given by two sensors"):
+        map_modal_data(ModalData(("5:z", "6:z"), (s,)), {"5:z": "t:z", "6:z": "t:z"}, "m.csv")

@@ -23,6 +23,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cappe.exceptions import DataError
 from cappe.systems.frf import FRFData
@@ -243,25 +244,9 @@ def map_modal_data(data: ModalData, mapping: Mapping[str, str] | None,
     DataError
         No sensor of the data is in the map.
     """
-    where = f" ({source})" if source else ""
-    rows = map_channels(data.sensors, mapping)
-    keep = [k for k, (s, _) in enumerate(rows) if s is not None]
-    if not keep:
-        msg = f"sensor map{where} names none of the modal data's sensors {list(data.sensors)[:6]}"
-        raise DataError(msg)
-    sign = np.array([rows[k][1] for k in keep])
+    keep, names, sign, notes = _selection(data.sensors, mapping, source, "sensor")
     sets = [replace(s, shapes=s.shapes[keep] * sign[:, None]) for s in data.sets]
-    notes = []
-    flipped = [data.sensors[k] for k in keep if rows[k][1] < 0]
-    if flipped:
-        notes.append(f"{len(flipped)} sensor(s) measured in a negative direction, sign flipped: "
-                     f"{', '.join(flipped[:8])}{' ...' if len(flipped) > 8 else ''}")
-    dropped = [data.sensors[k] for k, (s, _) in enumerate(rows) if s is None]
-    if dropped:
-        notes.append(f"warning: {len(dropped)} sensor(s) not in the sensor map{where} left out: "
-                     f"{', '.join(dropped[:8])}{' ...' if len(dropped) > 8 else ''}")
-    names = tuple(str(rows[k][0]) for k in keep)
-    return ModalData(names, tuple(sets), data.source), notes
+    return ModalData(tuple(names), tuple(sets), data.source), notes
 
 
 def map_time_data(data: TimeData, mapping: Mapping[str, str] | None,
@@ -296,26 +281,35 @@ def map_time_data(data: TimeData, mapping: Mapping[str, str] | None,
     >>> mapped.channels, mapped.values[0].tolist()
     (('fx', 'sy'), [-1.0, -2.0])
     """
+    keep, names, sign, notes = _selection(data.channels, mapping, source, "channel")
+    units = tuple(data.units[k] for k in keep) if data.units else ()
+    return replace(data, values=data.values[keep] * sign[:, None], channels=tuple(names), units=units), notes
+
+
+def _selection(labels: Sequence[str], mapping: Mapping[str, str] | None, source: str,
+               noun: str) -> tuple[list[int], list[str], NDArray[np.float64], list[str]]:
+    """The rows a sensor map keeps: their indices, model names and signs, and the notes a user should see.
+
+    One rule for every data type: no row kept, or two rows mapped to one model channel, is an error; a negative
+    direction is flipped and said; rows not in the map are left out with a warning."""
     where = f" ({source})" if source else ""
-    rows = map_channels(data.channels, mapping)
+    rows = map_channels(labels, mapping)
     keep = [k for k, (s, _) in enumerate(rows) if s is not None]
     if not keep:
-        msg = f"sensor map{where} names none of the channels {list(data.channels)[:6]}"
+        msg = f"sensor map{where} names none of the {noun}s {list(labels)[:6]}"
         raise DataError(msg)
     names = [str(rows[k][0]) for k in keep]
     doubled = sorted({n for n in names if names.count(n) > 1})
     if doubled:
-        msg = f"sensor map{where}: channels {doubled} are each measured by two channels of the data"
+        msg = f"sensor map{where}: {doubled} are each given by two {noun}s of the data"
         raise DataError(msg)
-    sign = np.array([rows[k][1] for k in keep])
-    units = tuple(data.units[k] for k in keep) if data.units else ()
     notes = []
-    flipped = [data.channels[k] for k in keep if rows[k][1] < 0]
+    flipped = [labels[k] for k in keep if rows[k][1] < 0]
     if flipped:
-        notes.append(f"{len(flipped)} channel(s) measured in a negative direction, sign flipped: "
+        notes.append(f"{len(flipped)} {noun}(s) measured in a negative direction, sign flipped: "
                      f"{', '.join(flipped[:8])}{' ...' if len(flipped) > 8 else ''}")
-    dropped = [data.channels[k] for k, (s, _) in enumerate(rows) if s is None]
+    dropped = [labels[k] for k, (s, _) in enumerate(rows) if s is None]
     if dropped:
-        notes.append(f"warning: {len(dropped)} channel(s) not in the sensor map{where} left out: "
+        notes.append(f"warning: {len(dropped)} {noun}(s) not in the sensor map{where} left out: "
                      f"{', '.join(dropped[:8])}{' ...' if len(dropped) > 8 else ''}")
-    return replace(data, values=data.values[keep] * sign[:, None], channels=tuple(names), units=units), notes
+    return keep, names, np.array([rows[k][1] for k in keep], dtype=float), notes
