@@ -92,6 +92,7 @@ def read_matrix(spec: object, base: Path | None, where: str, *, square: bool = T
             raw = _from_npz(path, key, where, square)
     except ModelError:
         raise
+    # scipy raises NotImplementedError for MATLAB v7.3 (HDF5) files and EOFError for cut ones: both are bad input
     except (OSError, ValueError, TypeError, KeyError, IndexError, NotImplementedError, EOFError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         msg = f"cannot read matrix file {path}: {reason} ({where})"
