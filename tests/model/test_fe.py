@@ -20,7 +20,7 @@ import scipy.sparse as sps
 from cappe.exceptions import ModelError
 from cappe.modal import modal_batch
 from cappe.model import NumericModel, StructureBuilder, load_model
-from cappe.model.fe import BeamSection, craig_bampton, frame_model
+from cappe.model.fe import BeamSection, craig_bampton, frame_from_spec, frame_model
 
 E, NU, RHO = 210e9, 0.3, 7850.0
 
@@ -209,3 +209,92 @@ def test_builder_takes_arrays_and_a_reduction() -> None:
     with pytest.raises(ModelError, match=r"reduction takes \{band: Hz, multiple: 1.5\} or \{modes: n\}"):
         b.flexible_body("f", mass=fm.mass, stiffness=fm.stiffness, nodes=[{"name": "a", "at": [0, 0, 0]}],
                         reduction={"band": 100, "modes": 3})
+
+
+def _portal_spec(n: int = 10) -> dict:  # type: ignore[type-arg]
+    """The portal of :func:`_portal` as a model file's frame entry."""
+    sec = BeamSection.rectangle(0.06, 0.06, E=E, nu=NU, rho=RHO)
+    section = {"E": sec.E, "G": sec.G, "A": sec.A, "Iy": sec.Iy, "Iz": sec.Iz, "J": sec.J, "rho": sec.rho}
+    return {"sections": {"col": section},
+            "beams": [{"points": [[0, 0, 0], [0, 0, 1], [1.5, 0, 1], [1.5, 0, 0]], "section": "col", "divide": n}]}
+
+
+def test_frame_spec_gives_the_frame_generators_matrices() -> None:
+    nodes, fm = _portal()
+    spec = frame_from_spec(_portal_spec(), "test")
+    np.testing.assert_allclose(spec.nodes, nodes, atol=1e-15)
+    np.testing.assert_allclose(spec.stiffness.toarray(), fm.stiffness.toarray(), rtol=1e-12, atol=1e-6)
+    np.testing.assert_allclose(spec.mass.toarray(), fm.mass.toarray(), rtol=1e-12, atol=1e-15)
+    # line_mass in place of rho: rho = line_mass / A
+    sec = dict(_portal_spec()["sections"]["col"])
+    sec["line_mass"] = sec.pop("rho") * sec["A"]
+    by_line_mass = frame_from_spec({**_portal_spec(), "sections": {"col": sec}}, "test")
+    np.testing.assert_allclose(by_line_mass.mass.toarray(), fm.mass.toarray(), rtol=1e-12, atol=1e-15)
+
+
+def test_a_frame_body_in_the_builder_equals_the_same_matrices_given_as_arrays() -> None:
+    nodes, fm = _portal()
+    last = len(nodes) - 1
+    interface = [{"name": "foot_a", "at": [0.0, 0.0, 0.0]}, {"name": "foot_b", "at": [1.5, 0.0, 0.0]}]
+    models = []
+    for frame in (True, False):
+        b = StructureBuilder("portal")
+        if frame:
+            b.flexible_body("f", frame=_portal_spec(), nodes=interface, reduction={"band": 150, "multiple": 3},
+                            recovery={"nodes": [{"name": "top", "at": nodes[15].tolist(), "dofs": ["x", "y", "z"]}]})
+        else:
+            b.flexible_body("f", mass=fm.mass, stiffness=fm.stiffness, reduction={"band": 150, "multiple": 3},
+                            nodes=[{**interface[0], "row": 0}, {**interface[1], "row": 6 * last}],
+                            recovery={"nodes": [{"name": "top", "at": nodes[15].tolist(), "dofs": ["x", "y", "z"],
+                                                 "row": 6 * 15}]})
+        for name, x in (("a", 0.0), ("b", 1.5)):
+            b.element(name, bodies=["ground", "f"], at=[x, 0, 0], stiffness=dict.fromkeys(
+                ("x", "y", "z", "rx", "ry", "rz"), 1.0e7))
+        b.sensor("top", body="f", point="top")
+        models.append(NumericModel(b.build()))
+    one, two = (modal_batch(m, n_modes=8, sensors=["top"]) for m in models)
+    np.testing.assert_allclose(one.frequency, two.frequency, rtol=1e-10)
+    np.testing.assert_allclose(np.abs(one.shapes), np.abs(two.shapes), rtol=1e-8, atol=1e-12)
+
+
+@pytest.mark.parametrize(("change", "match"), [
+    ({"beams": []}, r"frame beams must be a non-empty list; got \[\] \(t.beams\)"),
+    ({"up": [0, 0, 0]}, r"frame up must be a non-zero 3-vector; got \[0, 0, 0\] \(t.up\)"),
+    ({"sections": {"col": {"E": 1.0}}}, r"section 'col' takes E, G, A, Iy, Iz, J, one of rho .* \(t.sections.col\)"),
+    ({"sections": {"col": {"E": -1.0, "G": 1.0, "A": 1.0, "Iy": 1.0, "Iz": 1.0, "J": 1.0, "rho": 1.0}}},
+     r"section 'col' E must be a positive number; got -1.0 \(t.sections.col.E\)"),
+    ({"sections": {"col": {"E": 1.0, "G": 1.0, "A": 1.0, "Iy": 1.0, "Iz": 1.0, "J": 1.0, "rho": 1.0, "kappa": 2}}},
+     r"section 'col' kappa must be in \(0, 1\] or null \(Euler-Bernoulli\); got 2 \(t.sections.col.kappa\)"),
+    ({"beams": [{"points": [[0, 0, 0], [1, 0, 0]], "section": "web"}]},
+     r"beam section 'web' is not one of col \(t.beams\[0\].section\)"),
+    ({"beams": [{"points": [[0, 0, 0], [1, 0, 0]], "section": "col", "divide": 0}]},
+     r"beam divide must be an integer 1..1000; got 0 \(t.beams\[0\].divide\)"),
+    ({"beams": [{"points": [[0, 0, 0]], "section": "col"}]},
+     r"beam points must be at least two finite \[x, y, z\] \(m\); got \[\[0, 0, 0\]\] \(t.beams\[0\].points\)"),
+    ({"beams": [{"points": [[0, 0, 0], [0, 0, 0]], "section": "col"}]},
+     r"beam points \[0.0, 0.0, 0.0\] and \[0.0, 0.0, 0.0\] coincide \(t.beams\[0\].points\)"),
+    ({"beams": [{"points": [[0, 0, 0], [1, 0, 0]], "sect": "col"}]},
+     r"a beam is \{points: \[\[x, y, z\], ...\], section: NAME, divide: n\}; got .* \(t.beams\[0\]\)"),
+])
+def test_bad_frame_specs_are_one_line_errors_naming_the_entry(change: dict, match: str) -> None:  # type: ignore[type-arg]
+    with pytest.raises(ModelError, match=match):
+        frame_from_spec({**_portal_spec(), **change}, "t")
+
+
+def test_frame_nodes_take_their_rows_from_the_frame() -> None:
+    cases = [
+        ({"nodes": [{"name": "a", "at": [0.0, 0.0, 0.55]}]},
+         r"node 'a' at \[0.0, 0.0, 0.55\] is not a node of flexible body 'f''s frame \(nearest \[0.0, 0.0, 0.[56]\]\) "
+         r"\(flexible_bodies\[0\].nodes\[0\].at\)"),
+        ({"nodes": [{"name": "a", "at": [0.0, 0.0, 0.0], "row": 0}]},
+         r"a node of a frame takes its rows from its coordinates; remove 'row' \(flexible_bodies\[0\].nodes\[0\].row\)"),
+        ({"nodes": [{"name": "a", "at": [0.0, 0.0, 0.0], "dofs": ["x", "rz"]}]},
+         r"node 'a' dofs on a frame must be a run of x y z rx ry rz in that order; got \['x', 'rz'\]"),
+        ({"mass": np.eye(6), "stiffness": np.eye(6), "nodes": [{"name": "a", "at": [0.0, 0.0, 0.0]}]},
+         r"flexible body 'f' takes either mass and stiffness or a frame, not both \(flexible_bodies\[0\]\)"),
+    ]
+    for kwargs, match in cases:
+        with pytest.raises(ModelError, match=match):
+            StructureBuilder("portal").flexible_body("f", frame=_portal_spec(), **kwargs)
+    with pytest.raises(ModelError, match=r"flexible body 'f' needs mass and stiffness matrices, or a frame"):
+        StructureBuilder("portal").flexible_body("f", nodes=[{"name": "a", "at": [0.0, 0.0, 0.0]}])

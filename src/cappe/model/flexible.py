@@ -35,7 +35,8 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import ModelError
 
-__all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode", "NodeLine"]
+__all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode", "NodeLine",
+           "frame_node_entries"]
 
 Array = NDArray[np.float64]
 _DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
@@ -734,3 +735,62 @@ def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], wher
             raise ModelError(msg)
         out.append(NodeLine(line.name, line.nodes, line.origin, line.direction, tuple(float(v) for v in s)))  # type: ignore[arg-type]
     return tuple(out)
+
+
+def frame_node_entries(body: str, entries: object, coordinates: Array, where: str) -> object:
+    """Node entries of a body built from a frame, with each node's ``row`` set from its coordinates.
+
+    A node sits on a frame node (within 1 nm) and its ``dofs`` are a run of ``x y z rx ry rz`` in that order
+    (the frame's rows ``6 i .. 6 i + 5``); it gives no ``row`` of its own.
+
+    Parameters
+    ----------
+    body : str
+        The body, for messages.
+    entries : list of mappings or None
+        The ``nodes`` (or ``recovery.nodes``) entries.
+    coordinates : ndarray, shape (n_nodes, 3)
+        The frame's node coordinates (m, body frame).
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    list of mappings or the entries unchanged where they are not a list (parse_nodes reports those)
+
+    Raises
+    ------
+    ModelError
+        A node is off the frame's nodes, gives a row, or its DOFs are not a run.
+    """
+    if not isinstance(entries, (list, tuple)):
+        return entries
+    out: list[object] = []
+    for i, entry in enumerate(entries):
+        here = f"{where}[{i}]"
+        if not isinstance(entry, Mapping) or "at" not in entry:
+            out.append(entry)
+            continue
+        if "row" in entry:
+            msg = f"a node of a frame takes its rows from its coordinates; remove 'row' ({here}.row)"
+            raise ModelError(msg)
+        try:
+            at = np.array(entry["at"], dtype=float).reshape(3)
+        except (TypeError, ValueError):
+            out.append(entry)
+            continue
+        dist = np.linalg.norm(coordinates - at, axis=1)
+        k = int(np.argmin(dist))
+        if dist[k] > 1e-9:
+            msg = (f"node {entry.get('name')!r} at {at.tolist()} is not a node of flexible body {body!r}'s frame "
+                   f"(nearest {coordinates[k].tolist()}) ({here}.at)")
+            raise ModelError(msg)
+        dofs = entry.get("dofs", list(_DIRECTIONS))
+        dof_list = list(dofs) if isinstance(dofs, (list, tuple)) else [dofs]
+        index = [_DIRECTIONS.index(d) for d in dof_list if d in _DIRECTIONS]
+        if len(index) == len(dof_list) and index and index != list(range(index[0], index[0] + len(index))):
+            msg = (f"node {entry.get('name')!r} dofs on a frame must be a run of x y z rx ry rz in that order; got "
+                   f"{dofs!r} ({here}.dofs)")
+            raise ModelError(msg)
+        out.append({**entry, "row": 6 * k + (index[0] if index else 0)})
+    return out

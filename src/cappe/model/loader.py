@@ -72,8 +72,9 @@ _KEYS = {
     "axes": ({"name"}, {"positions", "unit", "description"}),
     "bodies": ({"name", "mass"}, {"inertia", "position", "com", "dofs", "spin", "description"}),
     "flexible_bodies": (
-        {"name", "mass", "stiffness", "nodes"},
-        {"position", "mass_scale", "stiffness_scale", "damping", "recovery", "reduction", "lines", "description"},
+        {"name", "nodes"},
+        {"mass", "stiffness", "frame", "position", "mass_scale", "stiffness_scale", "damping", "recovery", "reduction",
+         "lines", "description"},
     ),
     "elements": ({"name", "bodies"}, {"points", "at", "axes", "stiffness", "damping", "loss", "description"}),
     "inputs": ({"name", "body"}, {"point", "direction", "kind"}),

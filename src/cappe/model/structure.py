@@ -42,6 +42,7 @@ from cappe.model.flexible import (
     FlexibleBody,
     InterfaceNode,
     checked_matrices,
+    frame_node_entries,
     matrix_source,
     modal_damping_matrix,
     parse_damping,
@@ -1096,9 +1097,10 @@ class StructureBuilder:
         self,
         name: str,
         *,
-        mass: object,
-        stiffness: object,
+        mass: object = None,
+        stiffness: object = None,
         nodes: Sequence[Mapping[str, object]],
+        frame: Mapping[str, object] | None = None,
         position: object = (0, 0, 0),
         mass_scale: object = 1,
         stiffness_scale: object = 1,
@@ -1120,8 +1122,14 @@ class StructureBuilder:
         mass, stiffness : array_like, sparse matrix, str or mapping
             The matrices (kg, N/m; order n up to :data:`~cappe.model.flexible.MAX_FLEXIBLE_DOF`), or files
             ``"bed_K.mtx"`` / ``{file: "bed.npz", key: "K"}`` (.mtx, .mat, .npz) relative to the model file.
+            Leave both out where ``frame`` gives the body.
         nodes : list of mappings
             Interface nodes ``{name, at: [x, y, z] (m, body frame), dofs: [x, y, ...], row: first row}``.
+        frame : mapping, optional
+            A 3-D beam frame generated at load time instead of matrices (:func:`cappe.model.fe.frame_from_spec`:
+            ``{sections: {NAME: {E, G, A, Iy, Iz, J, rho | line_mass}}, beams: [{points, section, divide}]}``);
+            nodes (and recovery nodes) sit on frame nodes and take their rows from their coordinates. Usually
+            with a ``reduction``.
         position : 3-vector of expressions
             Origin of the body frame in global coordinates (m).
         mass_scale, stiffness_scale : expression
@@ -1153,6 +1161,21 @@ class StructureBuilder:
             msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
             raise ModelError(msg)
         self._claim("bodies", name, where)
+        if frame is not None:
+            if mass is not None or stiffness is not None:
+                msg = f"flexible body {name!r} takes either mass and stiffness or a frame, not both ({where})"
+                raise ModelError(msg)
+            from cappe.model.fe._frame import frame_from_spec
+
+            generated = frame_from_spec(frame, f"{where}.frame")
+            mass, stiffness = generated.mass, generated.stiffness
+            nodes = frame_node_entries(name, nodes, generated.nodes, f"{where}.nodes")  # type: ignore[assignment]
+            if isinstance(recovery, Mapping) and "nodes" in recovery:
+                recovery = {**recovery, "nodes": frame_node_entries(name, recovery["nodes"], generated.nodes,
+                                                                   f"{where}.recovery.nodes")}
+        elif mass is None or stiffness is None:
+            msg = f"flexible body {name!r} needs mass and stiffness matrices, or a frame ({where})"
+            raise ModelError(msg)
         interior: tuple[InterfaceNode, ...] = ()
         rec = None
         if reduction is not None:

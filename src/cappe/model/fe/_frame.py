@@ -14,7 +14,7 @@ DOFs per node: ``x y z rx ry rz`` (global), node ``i`` at rows ``6 i .. 6 i + 5`
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -23,7 +23,7 @@ from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import ModelError
 
-__all__ = ["BeamSection", "FrameModel", "beam_element_matrices", "frame_model"]
+__all__ = ["BeamSection", "FrameModel", "beam_element_matrices", "frame_from_spec", "frame_model"]
 
 Array = NDArray[np.float64]
 _DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
@@ -275,3 +275,126 @@ def frame_model(nodes: ArrayLike, elements: ArrayLike, section: BeamSection | Se
         return sps.csr_array((mat + mat.T) / 2)
 
     return FrameModel(xyz, assemble(k_vals), assemble(m_vals))
+
+
+_SECTION_KEYS = ("E", "G", "A", "Iy", "Iz", "J")
+
+
+def _section_from_spec(name: str, spec: object, where: str) -> BeamSection:
+    """A section ``{E, G, A, Iy, Iz, J, rho or line_mass, kappa}`` of a frame spec (SI; ``line_mass`` kg/m gives
+    ``rho = line_mass / A``; ``kappa`` null: Euler-Bernoulli, default 5/6)."""
+    allowed = {*_SECTION_KEYS, "rho", "line_mass", "kappa"}
+    if not isinstance(spec, Mapping) or not set(_SECTION_KEYS) <= set(spec) or not set(spec) <= allowed \
+            or ("rho" in spec) == ("line_mass" in spec):
+        msg = (f"section {name!r} takes E, G, A, Iy, Iz, J, one of rho (kg/m^3) and line_mass (kg/m), and optionally "
+               f"kappa; got {spec!r} ({where})")
+        raise ModelError(msg)
+    values: dict[str, float] = {}
+    for key in (*_SECTION_KEYS, "rho", "line_mass"):
+        if key not in spec:
+            continue
+        v = spec[key]
+        if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v <= 0:
+            msg = f"section {name!r} {key} must be a positive number; got {v!r} ({where}.{key})"
+            raise ModelError(msg)
+        values[key] = float(v)
+    kappa = spec.get("kappa", 5.0 / 6.0)
+    if kappa is not None and (isinstance(kappa, bool) or not isinstance(kappa, (int, float)) or not 0 < kappa <= 1):
+        msg = f"section {name!r} kappa must be in (0, 1] or null (Euler-Bernoulli); got {kappa!r} ({where}.kappa)"
+        raise ModelError(msg)
+    rho = values["rho"] if "rho" in values else values["line_mass"] / values["A"]
+    return BeamSection(E=values["E"], G=values["G"], rho=rho, A=values["A"], Iy=values["Iy"], Iz=values["Iz"],
+                       J=values["J"], kappa=None if kappa is None else float(kappa))
+
+
+def frame_from_spec(spec: object, where: str) -> FrameModel:
+    """A frame described in a model file: sections and beams (polylines of points, each span cut into elements).
+
+    ``{sections: {NAME: {E, G, A, Iy, Iz, J, rho | line_mass, kappa}}, beams: [{points: [[x, y, z], ...],
+    section: NAME, divide: 1}], up: [0, 1, 0]}``. Points closer than 1 nm are one node, so beams that share a point
+    are joined there rigidly. Each element's local y axis is ``up`` x (local x) (:func:`frame_model`).
+
+    Parameters
+    ----------
+    spec : mapping
+        The ``frame`` entry of a flexible body.
+    where : str
+        The model entry, for messages.
+
+    Returns
+    -------
+    FrameModel
+
+    Raises
+    ------
+    ModelError
+        An entry breaks a rule; the message names it.
+
+    Examples
+    --------
+    >>> spec = {"sections": {"s": {"E": 2.1e11, "G": 8.1e10, "A": 1e-3, "Iy": 1e-7, "Iz": 1e-7, "J": 2e-7,
+    ...                            "rho": 7850.0}},
+    ...         "beams": [{"points": [[0, 0, 0], [1, 0, 0]], "section": "s", "divide": 4}]}
+    >>> frame_from_spec(spec, "example").nodes.shape
+    (5, 3)
+    """
+    if not isinstance(spec, Mapping) or not {"sections", "beams"} <= set(spec) \
+            or not set(spec) <= {"sections", "beams", "up"}:
+        msg = f"frame takes sections, beams and optionally up; got {spec!r} ({where})"
+        raise ModelError(msg)
+    sections_spec = spec["sections"]
+    if not isinstance(sections_spec, Mapping) or not sections_spec:
+        msg = f"frame sections must be a mapping NAME: {{...}}; got {sections_spec!r} ({where}.sections)"
+        raise ModelError(msg)
+    sections = {str(k): _section_from_spec(str(k), v, f"{where}.sections.{k}") for k, v in sections_spec.items()}
+    up = spec.get("up", [0.0, 1.0, 0.0])
+    if not isinstance(up, (list, tuple)) or len(up) != 3 or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in up) or not any(up):
+        msg = f"frame up must be a non-zero 3-vector; got {up!r} ({where}.up)"
+        raise ModelError(msg)
+    beams = spec["beams"]
+    if not isinstance(beams, (list, tuple)) or not beams:
+        msg = f"frame beams must be a non-empty list; got {beams!r} ({where}.beams)"
+        raise ModelError(msg)
+    coords: list[Array] = []
+    index: dict[tuple[int, int, int], int] = {}
+
+    def node(point: Array) -> int:
+        key = tuple(int(round(v * 1e9)) for v in point)
+        if key not in index:
+            index[key] = len(coords)  # type: ignore[index]
+            coords.append(point)
+        return index[key]  # type: ignore[index]
+
+    elements: list[tuple[int, int]] = []
+    element_sections: list[BeamSection] = []
+    for i, beam in enumerate(beams):
+        here = f"{where}.beams[{i}]"
+        if not isinstance(beam, Mapping) or not {"points", "section"} <= set(beam) \
+                or not set(beam) <= {"points", "section", "divide"}:
+            msg = f"a beam is {{points: [[x, y, z], ...], section: NAME, divide: n}}; got {beam!r} ({here})"
+            raise ModelError(msg)
+        if beam["section"] not in sections:
+            msg = f"beam section {beam['section']!r} is not one of {', '.join(sections)} ({here}.section)"
+            raise ModelError(msg)
+        divide = beam.get("divide", 1)
+        if isinstance(divide, bool) or not isinstance(divide, int) or not 1 <= divide <= 1000:
+            msg = f"beam divide must be an integer 1..1000; got {divide!r} ({here}.divide)"
+            raise ModelError(msg)
+        try:
+            points = np.array(beam["points"], dtype=float)
+        except (TypeError, ValueError):
+            points = np.zeros((0, 0))
+        if points.ndim != 2 or points.shape[0] < 2 or points.shape[1] != 3 or not np.isfinite(points).all():
+            msg = f"beam points must be at least two finite [x, y, z] (m); got {beam['points']!r} ({here}.points)"
+            raise ModelError(msg)
+        for a, b in zip(points[:-1], points[1:], strict=True):
+            if np.linalg.norm(b - a) <= 1e-9:
+                msg = f"beam points {a.tolist()} and {b.tolist()} coincide ({here}.points)"
+                raise ModelError(msg)
+            ids = [node(a + (b - a) * t) for t in np.linspace(0.0, 1.0, divide + 1)]
+            for p, q in zip(ids[:-1], ids[1:], strict=True):
+                elements.append((p, q))
+                element_sections.append(sections[str(beam["section"])])
+    return frame_model(np.array(coords), np.array(elements, dtype=np.intp), element_sections,
+                       up=np.asarray(up, dtype=float))
