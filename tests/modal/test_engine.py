@@ -6,6 +6,7 @@ import copy
 
 import numpy as np
 import pytest
+import scipy.linalg
 
 from cappe.exceptions import ModelError
 from cappe.modal import ModalEngine, modal_batch
@@ -324,3 +325,59 @@ def test_empty_sensor_list_is_a_model_error():
     # `--sensors ""` reached the engine as [] and ended in a reshape ValueError traceback
     with pytest.raises(ModelError, match=r"list of sensor channels for model 'two-mass-rig' is empty"):
         ModalEngine(load_model("builtin:two-mass-rig"), sensors=[])
+
+
+def _flexible_with_dense_rows() -> NumericModel:
+    """A 30 kg block on a free-free steel beam (7 nodes) on two mounts: the beam's loss factor gives dense rank-one
+    damping rows and a sensor between two nodes reads a dense recovery row (the engine's BLAS path)."""
+    from cappe.model.fe import BeamSection, frame_model
+
+    n = 7
+    nodes = np.c_[np.linspace(0, 1.2, n), np.zeros(n), np.zeros(n)]
+    fm = frame_model(nodes, [[i, i + 1] for i in range(n - 1)], BeamSection.rectangle(0.08, 0.12, E=210e9, nu=0.3,
+                                                                                       rho=7850.0))
+    rec = np.zeros((3, 6 * n))
+    rec[:, 18:21] = rec[:, 24:27] = 0.5 * np.eye(3)
+    b = StructureBuilder("beam-block")
+    b.parameter("k", 2.0e7, kind="stiffness")
+    b.parameter("s_k", 1.0, kind="other")
+    b.parameter("eta", 0.01, kind="loss")
+    b.flexible_body("beam", mass=fm.mass, stiffness=fm.stiffness, stiffness_scale="s_k", damping={"loss": "eta"},
+                    nodes=[{"name": f"n{i}", "at": [float(x), 0.0, 0.0]} for i, x in enumerate(nodes[:, 0])],
+                    recovery={"matrix": rec, "nodes": [{"name": "mid", "at": [0.55, 0.0, 0.0], "dofs": ["x", "y", "z"]}]})
+    for name, x in (("left", 0.0), ("right", 1.2)):
+        b.element(name, bodies=["ground", "beam"], at=[x, 0, 0],
+                  stiffness={d: "k" for d in ("x", "y", "z", "rx", "ry", "rz")}, damping={"y": 300.0})
+    b.body("block", mass=30.0, inertia={"xx": 0.2, "yy": 0.2, "zz": 0.2}, position=[0.6, 0.0, 0.1])
+    b.element("mount", bodies=["beam", "block"], at=[0.6, 0, 0],
+              stiffness={d: "k" for d in ("x", "y", "z", "rx", "ry", "rz")})
+    b.sensor("mid", body="beam", point="mid")
+    b.sensor("block", body="block")
+    return NumericModel(b.build())
+
+
+def test_dense_rows_of_flexible_bodies_give_the_same_bits_in_any_chunk_and_the_numpy_damping():
+    model = _flexible_with_dense_rows()
+    engine = ModalEngine(model, n_workers=1, chunk_size=64)
+    assert engine._stacked_rows(None, engine._sensor_rows(None)[1],
+                                model.damping_sources().rows).dense_index.size > 30  # the dense path is taken
+    params = random_params(model, 9, seed=4)
+    params[:, model.parameter_names.index("eta")] = 0.01  # masses stay nominal: the nominal reduction's path too
+    kwargs = {"contributions": True}
+    whole = engine.evaluate(params, **kwargs)
+    for chunk in (1, 4):
+        parts = ModalEngine(model, chunk_size=chunk, n_workers=1).evaluate(params, **kwargs)
+        for name in ("frequency", "damping", "shapes", "contributions", "damping_gradient"):
+            np.testing.assert_array_equal(getattr(parts, name), getattr(whole, name), err_msg=f"{name} {chunk}")
+    # independent of the rank-one sources and of the projection: numpy on the assembled matrices
+    for i in (0, 5):
+        system = model.system(params[i])
+        lam, phi = scipy.linalg.eigh(system.K, system.M)
+        omega = np.sqrt(lam)
+        zeta = np.einsum("ij,ik,kj->j", phi, system.C, phi) / (2 * omega) + np.einsum(
+            "ij,ik,kj->j", phi, system.H, phi) / (2 * omega**2)
+        np.testing.assert_allclose(whole.frequency[i], omega / (2 * np.pi), rtol=1e-9)
+        np.testing.assert_allclose(whole.damping[i], zeta, rtol=1e-8, atol=1e-12)
+        labels, rows = model.sensor_matrix()
+        shapes = rows @ phi
+        np.testing.assert_allclose(np.abs(whole.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())

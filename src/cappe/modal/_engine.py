@@ -135,7 +135,7 @@ class ModalEngine:
         self._sensor_cache: dict[tuple[float, ...], tuple[tuple[str, ...], Array]] = {}
         self._group_cache: dict[tuple[float, ...], list[NDArray[np.intp]]] = {}
         self._nominal_cache: dict[tuple[float, ...], _NominalReduction] = {}
-        self._stacked_cache: dict[tuple[float, ...], Any] = {}
+        self._stacked_cache: dict[tuple[float, ...], _Projection] = {}
         self._dof_channels = sensors == "dofs" or (sensors is None and not self.model.structure.sensors)
         self.sensors = self._sensor_rows(self.model.structure.default_position())[0]
 
@@ -521,11 +521,13 @@ class ModalEngine:
         reduced[rest] = other.reduce(own["K"])
         return mats, _Reductions(shared, nominal, other), reduced, None
 
-    def _stacked_rows(self, position: Mapping[str, float] | None, sensor_rows: Array, source_rows: Array) -> Any:
-        """The sensor rows above the damping sources' elongation rows at ``position``, as one sparse matrix."""
+    def _stacked_rows(self, position: Mapping[str, float] | None, sensor_rows: Array,
+                      source_rows: Array) -> _Projection:
+        """The sensor rows above the damping sources' elongation rows at ``position``, split into sparse and dense
+        rows (:class:`_Projection`)."""
         pos = self.model.position_vector(position)
         if pos not in self._stacked_cache:
-            self._stacked_cache[pos] = sps.csr_array(np.vstack([sensor_rows, source_rows]))
+            self._stacked_cache[pos] = _Projection(np.vstack([sensor_rows, source_rows]))
         return self._stacked_cache[pos]
 
     def _nominal_reduction(self, position: Mapping[str, float] | None) -> _NominalReduction:
@@ -612,11 +614,11 @@ class ModalEngine:
             if flat is None:
                 assert phi is not None
                 flat = _flatten(phi)
-            proj = np.asarray(stacked @ flat)
+            proj = stacked.project(flat, m)
             n_s = sensor_rows.shape[0]
             # contiguous (B, rows, m): the per-sample products of _first_order_damping must see the same layout
             # whatever the chunk size (BLAS sums a strided operand in another order)
-            shapes, elongation = _unflatten(proj[:n_s], m), _unflatten(proj[n_s:], m)
+            shapes, elongation = np.ascontiguousarray(proj[:, :n_s]), np.ascontiguousarray(proj[:, n_s:])
         if full or exact:
             phi = shapes_of(flat, phi)
         if repeats is not None:
@@ -678,6 +680,43 @@ def modal_batch(
 
 
 # -- numerical kernels ------------------------------------------------------------------------------
+class _Projection:
+    """Rows (n_rows, n) applied to the mode shapes of a chunk: the sensor and damping-source rows, or ``L^-T``.
+
+    Rows of rigid-body elements and sensors (and ``L^-T`` of rigid bodies' 6 x 6 mass blocks) touch a few DOFs:
+    they stay one sparse matrix applied to the chunk's shapes in the (n, B m) layout (each entry a fixed-order sum).
+    Rows with more than :attr:`DENSE_NNZ` entries (the rank-one damping sources of a flexible body's damping block,
+    sensors read through a recovery matrix, ``L^-T`` of its dense mass block) are dense over the flexible body's
+    coordinates: scipy's sparse product walks them entry by entry (measured: about 0.7 of the eigen-solves' time on
+    the 121-DOF flexible-bed machine tool), so they are one BLAS product per sample over their columns,
+    ``(r, n_c) @ (n_c, m)``, the same shapes whatever the chunk and so the same bits.
+    """
+
+    #: A row with more stored entries than this is treated as dense (two 6-DOF bodies give at most 12).
+    DENSE_NNZ = 16
+
+    def __init__(self, rows: Array) -> None:
+        nnz = np.count_nonzero(rows, axis=1)
+        dense = nnz > self.DENSE_NNZ
+        self.n_rows = rows.shape[0]
+        self.sparse_index = np.flatnonzero(~dense)
+        self.dense_index = np.flatnonzero(dense)
+        self.sparse = sps.csr_array(rows[self.sparse_index])
+        self.columns = np.flatnonzero(np.any(rows[self.dense_index] != 0, axis=0))
+        self.dense = np.ascontiguousarray(rows[np.ix_(self.dense_index, self.columns)])
+
+    def project(self, flat: Array, m: int) -> Array:
+        """``rows @ phi`` per sample, (B, n_rows, m), from the shapes laid out (n, B m) (:func:`_flatten`)."""
+        b = flat.shape[1] // m
+        if not self.dense_index.size:
+            return _unflatten(np.asarray(self.sparse @ flat), m)
+        out = np.empty((b, self.n_rows, m))
+        if self.sparse_index.size:
+            out[:, self.sparse_index] = _unflatten(np.asarray(self.sparse @ flat), m)
+        out[:, self.dense_index] = self.dense @ _unflatten(flat[self.columns], m)
+        return out
+
+
 def _flatten(shapes: Array) -> Array:
     """Shapes (B, n, m) laid out (n, B m), column ``k m + j`` holding mode j of sample k: one sparse product then
     maps the shapes of the whole chunk."""
@@ -775,7 +814,7 @@ class _NominalReduction:
         self.nominal = model.nominal.copy()
         self._mass_columns = [model.parameter_names.index(p) for p in model.matrix_parameters("M")]
         self._stiffness_columns = [model.parameter_names.index(p) for p in model.matrix_parameters("K")]
-        self._factor: tuple[Any, NDArray[np.intp], Any, Array] | None = None
+        self._factor: tuple[_Projection, NDArray[np.intp], Any, Array] | None = None
 
     def shares_mass(self, params: Array) -> NDArray[np.bool_]:
         """Which samples (B, n_params) have the nominal M: their mass parameters equal the nominal values."""
@@ -796,7 +835,7 @@ class _NominalReduction:
         _, first, inverse = np.unique(rows, return_index=True, return_inverse=True)
         return first.astype(np.intp), inverse.astype(np.intp).ravel()
 
-    def _factored(self) -> tuple[Any, NDArray[np.intp], Any, Array]:
+    def _factored(self) -> tuple[_Projection, NDArray[np.intp], Any, Array]:
         if self._factor is None:
             model = self.model
             mass = model.matrices(self.nominal[None, :], self.position, names=("M",))["M"]
@@ -812,7 +851,8 @@ class _NominalReduction:
             flat = (linv @ patterns @ linv_t).reshape(patterns.shape[0], -1)
             nz = np.flatnonzero(np.any(flat != 0, axis=0))
             # L^-T is block-diagonal like M (bodies): sparse
-            self._factor = (sps.csr_array(linv_t), nz, sps.csr_array(flat[:, nz].T), linv_t @ linv)
+            # (a flexible body's block of it is dense: see _Projection)
+            self._factor = (_Projection(linv_t), nz, sps.csr_array(flat[:, nz].T), linv_t @ linv)
         return self._factor
 
     def reduce(self, stiffness_coefficients: Array) -> Array:
@@ -830,7 +870,10 @@ class _NominalReduction:
 
     def flat_shapes(self, vectors: Array) -> Array:
         """``L^-T v`` laid out as :func:`_flatten` lays out ``v``."""
-        return np.asarray(self._factored()[0] @ _flatten(vectors))
+        linv_t = self._factored()[0]
+        if not linv_t.dense_index.size:
+            return np.asarray(linv_t.sparse @ _flatten(vectors))
+        return _flatten(linv_t.project(_flatten(vectors), vectors.shape[2]))
 
     def inverse_mass(self) -> Array:
         return self._factored()[3]
