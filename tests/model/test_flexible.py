@@ -335,13 +335,14 @@ def test_interior_sensor_uses_the_recovery_matrix() -> None:
     np.testing.assert_array_equal(nm.io_matrices()[1][0], rec[2])
 
 
-def _carriage_on_rail(position: object, point: object) -> StructureBuilder:
+def _carriage_on_rail(position: object, point: object, interpolation: str = "linear") -> StructureBuilder:
     """A 30 kg carriage (y, z) on a guide shoe riding the beam at ``point``, the carriage at ``position``."""
     nodes, k, m = _beam()
     b = StructureBuilder("rail")
     b.axis("p", [0.0, 0.3, 0.6, 1.2])
     b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
-                    lines=[{"name": "rail", "nodes": [f"n{i}" for i in range(N_NODES)]}])
+                    lines=[{"name": "rail", "nodes": [f"n{i}" for i in range(N_NODES)],
+                            "interpolation": interpolation}])
     _supported(b, "beam", "n0", f"n{N_NODES - 1}")
     b.body("carriage", mass=30.0, dofs=["y", "z"], position=position)
     b.element("shoe", bodies=["beam", "carriage"], points=[point, [0, 0, -0.1]],
@@ -372,6 +373,49 @@ def test_moving_interface_is_exact_at_nodes_and_continuous_in_between() -> None:
     assert np.max(np.abs(np.diff(freq, axis=0)) / freq[:-1]) < 0.02
     # the carriage's weight moves the frequencies: the position matters
     assert np.ptp(freq[:, 6]) > 0.01 * freq[:, 6].mean()
+
+
+def test_hermite_line_is_exact_at_nodes_and_c1_in_between() -> None:
+    hermite = NumericModel(_carriage_on_rail(["p", 0, 0.1], ["p", 0, 0], "hermite").build())
+    linear = NumericModel(_carriage_on_rail(["p", 0, 0.1], ["p", 0, 0]).build())
+    step = L_BEAM / (N_NODES - 1)
+    for node in (0, 2, 5):
+        fixed = NumericModel(_carriage_on_rail([node * step, 0, 0.1], f"n{node}").build())
+        # the close pair 33.47 / 33.49 Hz amplifies the rounding of the cubic weights at a node (1e-16) to 2e-9
+        np.testing.assert_allclose(modal_batch(hermite, position={"p": node * step}, n_modes=12).frequency,
+                                   modal_batch(fixed, n_modes=12).frequency, rtol=1e-8)
+
+    def freq(model: NumericModel, p: float) -> np.ndarray:
+        return modal_batch(model, position={"p": p}, n_modes=12).frequency[0]
+
+    # the derivative of the frequencies over the position, from the left and from the right of node 2: linear
+    # shape functions put a kink there (their slope jumps), the beam element's cubic does not (C1)
+    h = 1e-4
+    jumps = {}
+    for label, model in (("linear", linear), ("hermite", hermite)):
+        at = freq(model, 2 * step)
+        left = (at - freq(model, 2 * step - h)) / h
+        right = (freq(model, 2 * step + h) - at) / h
+        jumps[label] = (np.abs(right - left).max(), np.abs(right).max())
+    # the carriage's weight moves the frequencies: the slopes are not zero
+    assert jumps["hermite"][1] > 1.0  # Hz/m
+    # C1: the one-sided slopes differ by O(h) (second derivative times h); linear: by O(1)
+    assert jumps["hermite"][0] < 2e-2 * jumps["hermite"][1], jumps
+    assert jumps["linear"][0] > 30 * jumps["hermite"][0], jumps
+    # continuous: a sweep over the travel has no jumps between elements
+    sweep = np.linspace(0.0, L_BEAM, 121)
+    values = np.array([freq(hermite, v) for v in sweep])
+    assert np.max(np.abs(np.diff(values, axis=0)) / values[:-1]) < 0.02
+
+
+def test_hermite_interpolation_needs_six_dof_nodes_and_a_known_name() -> None:
+    nodes, k, m = _beam()
+    entries = _node_entries(nodes)
+    with pytest.raises(ModelError, match=r"line 'rail' interpolation must be 'linear' or 'hermite' \(beam elements: "
+                                         r"cubic with the rotations\); got 'cubic' \(flexible_bodies\[0\].lines\[0\]"
+                                         r".interpolation\)"):
+        StructureBuilder("b").flexible_body("beam", mass=m, stiffness=k, nodes=entries,
+                                            lines=[{"name": "rail", "nodes": ["n0", "n1"], "interpolation": "cubic"}])
 
 
 def test_moving_point_must_follow_a_line_of_nodes() -> None:

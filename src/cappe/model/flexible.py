@@ -601,7 +601,8 @@ class NodeLine:
 
     A point on the line at distance ``s`` from its first node moves with the nodes' DOFs weighted by linear shape
     functions (hat functions of ``s``): exactly the node's motion where the point sits on a node, continuous in
-    between; beyond the ends the end element's functions extrapolate.
+    between; beyond the ends the end element's functions extrapolate. With ``interpolation = "hermite"`` the nodes
+    are those of beam elements and the point moves as :meth:`hermite_weights` says (C1 along the line).
 
     Attributes
     ----------
@@ -615,6 +616,8 @@ class NodeLine:
         Unit vector from the first node to the last.
     s : tuple of float
         Each node's distance from the first (m), increasing.
+    interpolation : {"linear", "hermite"}
+        Linear shape functions, or beam elements' cubics in the nodes' translations and rotations.
     """
 
     name: str
@@ -622,6 +625,72 @@ class NodeLine:
     origin: tuple[float, float, float]
     direction: tuple[float, float, float]
     s: tuple[float, ...]
+    interpolation: str = "linear"
+
+    def hermite_weights(self, s: sp.Expr) -> list[tuple[sp.Matrix, sp.Matrix]]:
+        """Beam-element (cubic Hermite) interpolation of the nodes' six DOFs at line coordinate ``s`` (m).
+
+        Within the element of nodes ``i``, ``i + 1`` (length ``L``, ``xi = (s - s_i) / L``, line direction ``e``,
+        ``E = e e^T``, ``P = I - E``, ``[e]x`` the cross-product matrix): the axial translation and the torsion are
+        linear (``N1 = 1 - xi``, ``N2 = xi``), the transverse translation is the cubic of the end translations and
+        slopes ``theta x e``, and the bending rotation is ``e x dw/ds``::
+
+            u     = sum_j (N_j E + H_j P) u_j - L H'_j [e]x theta_j
+            theta = sum_j N_j E theta_j + P theta_j dH'_j/dxi + [e]x u_j dH_j/dxi / L
+
+        (``H`` the Hermite cubics of the translations, ``H'`` those of the slopes). At a node the point moves
+        exactly as the node; in between, the motion and its derivative along the line are continuous (C1 in ``s``).
+        Beyond the ends the end elements extrapolate.
+
+        Parameters
+        ----------
+        s : sympy expression
+            Distance along the line from the first node (m).
+
+        Returns
+        -------
+        list of (sympy Matrix (3, 6), sympy Matrix (3, 6))
+            Per node, the weights of its ``x y z rx ry rz`` on the point's translation and on its rotation.
+        """
+        e = sp.Matrix([sp.Float(v) for v in self.direction])
+        big_e = e * e.T
+        perp = sp.eye(3) - big_e
+        cross = sp.Matrix([[0, -e[2], e[1]], [e[2], 0, -e[0]], [-e[1], e[0], 0]])
+        knots = [sp.Float(v) for v in self.s]
+        k = len(knots)
+        # per element: the (translation, rotation) weight blocks of its two nodes as functions of s
+        pieces: list[list[tuple[sp.Matrix, sp.Matrix]]] = []
+        for i in range(k - 1):
+            length = knots[i + 1] - knots[i]
+            xi = (s - knots[i]) / length
+            n1, n2 = 1 - xi, xi
+            h = [1 - 3 * xi**2 + 2 * xi**3, xi - 2 * xi**2 + xi**3, 3 * xi**2 - 2 * xi**3, -xi**2 + xi**3]
+            dh = [(-6 * xi + 6 * xi**2) / length, (1 - 4 * xi + 3 * xi**2) / length,
+                  (6 * xi - 6 * xi**2) / length, (-2 * xi + 3 * xi**2) / length]  # d/ds of the four
+            ends = []
+            for n_lin, h_u, h_t, dh_u, dh_t in ((n1, h[0], h[1], dh[0], dh[1]), (n2, h[2], h[3], dh[2], dh[3])):
+                trans = (n_lin * big_e + h_u * perp).row_join(-length * h_t * cross)
+                rot = (dh_u * cross).row_join(n_lin * big_e + length * dh_t * perp)
+                ends.append((trans, rot))
+            pieces.append(ends)
+
+        def select(node: int, part: int) -> sp.Matrix:
+            """The node's weight block ``part`` (0 translation, 1 rotation), piecewise over the elements."""
+            out = sp.zeros(3, 6)
+            for r in range(3):
+                for c in range(6):
+                    branches: list[tuple[sp.Expr, Any]] = []
+                    for el in range(k - 1):
+                        if node not in (el, el + 1):
+                            value: sp.Expr = sp.Integer(0)
+                        else:
+                            value = sp.expand(pieces[el][node - el][part][r, c])
+                        condition = True if el == k - 2 else s < knots[el + 1]
+                        branches.append((value, condition))
+                    out[r, c] = sp.Piecewise(*branches) if len(branches) > 1 else branches[0][0]
+            return out
+
+        return [(select(j, 0), select(j, 1)) for j in range(k)]
 
     def shape_functions(self, s: sp.Expr) -> list[sp.Expr]:
         """Linear shape functions of the nodes at line coordinate ``s`` (m).
@@ -675,7 +744,8 @@ class NodeLine:
 
 
 def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], where: str) -> tuple[NodeLine, ...]:
-    """Lines of interface nodes ``[{name, nodes: [n0, n1, ...]}]`` (straight, at least two nodes, same DOFs).
+    """Lines of interface nodes ``[{name, nodes: [n0, n1, ...], interpolation}]`` (straight, at least two nodes, same
+    DOFs; ``interpolation`` ``linear`` (default) or ``hermite``: beam elements, all six DOFs).
 
     Parameters
     ----------
@@ -708,9 +778,16 @@ def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], wher
     out: list[NodeLine] = []
     for i, entry in enumerate(entries):
         here = f"{where}[{i}]"
-        if (not isinstance(entry, Mapping) or set(entry) != {"name", "nodes"} or not isinstance(entry["name"], str)
+        if (not isinstance(entry, Mapping) or not {"name", "nodes"} <= set(entry)
+                or not set(entry) <= {"name", "nodes", "interpolation"} or not isinstance(entry["name"], str)
                 or not isinstance(entry["nodes"], (list, tuple)) or len(entry["nodes"]) < 2):
-            msg = f"a line is {{name: NAME, nodes: [at least two interface nodes]}}; got {entry!r} ({here})"
+            msg = (f"a line is {{name: NAME, nodes: [at least two interface nodes], interpolation: linear | hermite}}; "
+                   f"got {entry!r} ({here})")
+            raise ModelError(msg)
+        interpolation = entry.get("interpolation", "linear")
+        if interpolation not in ("linear", "hermite"):
+            msg = (f"line {entry['name']!r} interpolation must be 'linear' or 'hermite' (beam elements: cubic with "
+                   f"the rotations); got {interpolation!r} ({here}.interpolation)")
             raise ModelError(msg)
         missing = [n for n in entry["nodes"] if n not in by_name]
         if missing:
@@ -719,6 +796,10 @@ def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], wher
         members = [by_name[n] for n in entry["nodes"]]
         if len({m.dofs for m in members}) != 1:
             msg = f"the nodes of line {entry['name']!r} must carry the same DOFs ({here}.nodes)"
+            raise ModelError(msg)
+        if interpolation == "hermite" and set(members[0].dofs) != set(_DIRECTIONS):
+            msg = (f"hermite interpolation along line {entry['name']!r} needs nodes with all six DOFs; they carry "
+                   f"{', '.join(members[0].dofs)} ({here}.nodes)")
             raise ModelError(msg)
         first, last = np.array(members[0].point), np.array(members[-1].point)
         span = float(np.linalg.norm(last - first))
@@ -733,7 +814,8 @@ def parse_lines(body: str, entries: object, nodes: Sequence[InterfaceNode], wher
             msg = (f"the nodes of line {entry['name']!r} must lie on a straight line in the order given "
                    f"({here}.nodes)")
             raise ModelError(msg)
-        out.append(NodeLine(line.name, line.nodes, line.origin, line.direction, tuple(float(v) for v in s)))  # type: ignore[arg-type]
+        out.append(NodeLine(line.name, line.nodes, line.origin, line.direction, tuple(float(v) for v in s),  # type: ignore[arg-type]
+                            str(interpolation)))
     return tuple(out)
 
 

@@ -1144,8 +1144,9 @@ class StructureBuilder:
             matrices, node rows index them, and the body is their Craig-Bampton model with the interface nodes' DOFs
             as boundary (:func:`cappe.model.fe.craig_bampton`).
         lines : list of mappings, optional
-            ``[{name, nodes: [n0, n1, ...]}]``: straight lines of interface nodes along which attachment points whose
-            coordinates depend on an axis travel (linear shape functions between the nodes).
+            ``[{name, nodes: [n0, n1, ...], interpolation: linear}]``: straight lines of interface nodes along which
+            attachment points whose coordinates depend on an axis travel (linear shape functions between the nodes;
+            ``hermite``: beam elements, cubic in the nodes' translations and rotations, C1 along the line).
         description : str
             Free text.
         where : str, optional

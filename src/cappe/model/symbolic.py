@@ -251,9 +251,21 @@ class SymbolicModel:
             raise ModelError(msg)
         line, s = found
         start = self._offset[body]
-        weights = line.shape_functions(s)
         names = DIRECTIONS[3:] if rotation else DIRECTIONS[:3]
         rows: list[SparseRow] = []
+        if line.interpolation == "hermite":
+            blocks = [block[1 if rotation else 0] for block in line.hermite_weights(s)]
+            for a in range(3):
+                combined: SparseRow = {}
+                for node_name, block in zip(line.nodes, blocks, strict=True):
+                    node = flex.node(node_name)
+                    assert node is not None  # parse_lines checked the line's nodes (all six DOFs)
+                    for c, d in enumerate(DIRECTIONS):
+                        if block[a, c] != 0:
+                            combined[start + node.rows[node.dofs.index(d)]] = block[a, c]
+                rows.append(combined)
+            return rows
+        weights = line.shape_functions(s)
         for d in names:
             row: SparseRow = {}
             for node_name, weight in zip(line.nodes, weights, strict=True):
