@@ -309,20 +309,24 @@ def _sobol_note(gsa: Any) -> str:
 
 
 def _mode_table(results: Sequence[Any]) -> str:
-    """Per position and reference mode: frequencies measured and model, their difference, NDD and MACXP."""
+    """Per position and reference mode: frequencies and damping ratios, measured and model, their differences, and
+    MACXP."""
     rows = []
     for res in results:
         for r, f_ref in enumerate(res.reference_frequency):
             f_model = float(res.model_frequency[r])
+            z_ref, z_model = 100 * float(res.reference_damping[r]), 100 * float(res.model_damping[r])
+            z_diff = _num(100 * (z_model / z_ref - 1), "+.3g") if z_ref > 0 else "-"
             rows.append([_e(_label(res.position)), str(r + 1), str(int(res.model_mode[r]) + 1), _num(f_ref, ".5g"),
-                         _num(f_model, ".5g"), _num(100 * (f_model / f_ref - 1), "+.3g"),
-                         _num(100 * float(res.ndd[r]), ".3g"), _num(100 * float(res.macxp[r]), ".2f")])
+                         _num(f_model, ".5g"), _num(100 * (f_model / f_ref - 1), "+.3g"), _num(z_ref, ".4g"),
+                         _num(z_model, ".4g"), z_diff, _num(100 * float(res.macxp[r]), ".2f")])
     return ("<h3>Modes</h3><p class=note>Reference (measured or simulated) against the identified model, mode by "
-            "mode: natural frequencies in Hz and their difference; NDD, the natural damping difference "
-            "|zeta_model - zeta_ref| / zeta_ref; MACXP, shape agreement weighted by pole proximity (paper eq. 4; "
-            "100 % = identical mode).</p>"
-            + _table(["position (m)", "mode", "model mode", "f reference (Hz)", "f model (Hz)", "difference %",
-                      "NDD %", "MACXP %"], rows))
+            "mode: natural frequencies in Hz and damping ratios zeta in % of critical damping, each with the "
+            "model's difference from the reference in % of the reference value (for the damping ratio this is the "
+            "signed NDD, (zeta_model - zeta_ref) / zeta_ref; '-' where the reference mode is undamped); MACXP, "
+            "shape agreement weighted by pole proximity (paper eq. 4; 100 % = identical mode).</p>"
+            + _table(["position (m)", "mode", "model mode", "f reference (Hz)", "f model (Hz)", "f difference %",
+                      "zeta reference %", "zeta model %", "zeta difference %", "MACXP %"], rows))
 
 
 #: a MACXP below this is explained on the page
