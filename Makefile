@@ -5,11 +5,13 @@ BIN := $(VENV)/bin
 STAMP := $(VENV)/.installed
 
 # The tests run in parallel, one pytest-xdist worker per core (each worker's BLAS on one thread: tests/conftest.py),
-# each test file on one worker so that a module's fixtures are built once. `make test` leaves out the slow
+# each test file on one worker so that a module's fixtures are built once, except the files of many independent
+# slow cases (SPREAD in tests/conftest.py, whose scheduler `--dist loadgroup` selects): their tests go one by one to
+# whichever worker is free. `make test` leaves out the slow
 # end-to-end cases marked `extended` (a faster test covers each: see the marker's reason); `make test-slow` runs
 # them, `make test-all` everything (CI). `make test TEST_WORKERS=0` runs them in this one process.
 TEST_WORKERS ?= auto
-PYTEST := $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadfile
+PYTEST := $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
 .PHONY: install demo test test-slow test-all check lint typecheck bench clean
 

@@ -1,4 +1,4 @@
-"""Shared fixtures, and one BLAS thread in each pytest-xdist worker."""
+"""Shared fixtures, one BLAS thread in each pytest-xdist worker, and the units of work of ``make test``."""
 
 from __future__ import annotations
 
@@ -24,6 +24,45 @@ def pytest_configure(config: pytest.Config) -> None:
     for name in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "BLIS_NUM_THREADS", "OMP_NUM_THREADS"):
         os.environ[name] = "1"
     ThreadpoolController().limit(limits=1)  # for the life of the worker
+
+
+#: Test files whose tests ``make test`` sends one by one to whichever worker is free, mapped to the test functions
+#: whose cases stay together, in order, on one worker. Every other file runs whole on one worker, as with
+#: ``--dist loadfile`` (its module fixtures built once). A file of many independent slow cases held one worker for
+#: minutes after the others were done; spread, each worker builds the module fixtures it needs once.
+SPREAD: dict[str, tuple[str, ...]] = {
+    "tests/cli/test_option_audit.py": (),  # 347 command-line cases; its data folder takes ~35 s per worker
+    # the README's commands read each other's files: one unit, in order
+    "tests/cli/test_model_cli.py": ("test_readme_command_runs_as_subprocess",),
+}
+
+
+def work_unit(nodeid: str) -> str:
+    """The unit of work of a test for ``make test``'s scheduler: its file, or itself in a :data:`SPREAD` file."""
+    path, _, rest = nodeid.partition("::")
+    if path not in SPREAD:
+        return path
+    name = rest.split("[", 1)[0]
+    return f"{path}::{name}" if name in SPREAD[path] else nodeid
+
+
+@pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist, absent without it
+def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
+    """``--dist loadgroup`` (``make test``) schedules by :func:`work_unit`.
+
+    pytest-xdist's own loadgroup reads ``xdist_group`` marks by rewriting ``item._nodeid``, which pytest 9 no longer
+    reads (the groups were silently ignored), so the groups are made here, from the node ids, by a scheduler of
+    xdist's public hook.
+    """
+    if config.getvalue("dist") != "loadgroup":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileOrTestScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            return work_unit(nodeid)
+
+    return FileOrTestScheduling(config, log)  # type: ignore[arg-type]
 
 
 @pytest.fixture(scope="session")

@@ -22,13 +22,14 @@ def figure(rows: int) -> tuple[Any, Any]:
     return plt.subplots(rows, 1, figsize=(7, 3 + 2 * rows), sharex=rows > 1)
 
 
-def save(fig: Any, path: str | Path) -> Path:
-    """Lay out, write ``fig`` to ``path`` (format by extension) through a temporary file, close it; returns the path."""
+def save(fig: Any, path: str | Path, *, rect: tuple[float, float, float, float] | None = None) -> Path:
+    """Lay out (the axes within ``rect``, figure fractions, when given: room for a figure legend), write ``fig`` to
+    ``path`` (format by extension) through a temporary file, close it; returns the path."""
     import matplotlib.pyplot as plt
 
     out = Path(path)
     tmp = out.with_name(f".{out.name}.tmp{out.suffix}")
-    fig.tight_layout()
+    fig.tight_layout(rect=rect)
     fig.savefig(tmp, dpi=120)
     plt.close(fig)
     tmp.replace(out)

@@ -79,6 +79,24 @@ def test_errors(capsys, tmp_path, rig_data):
     assert "F2" in err or "v1" in err or "a1" in err  # the missing channels are named
 
 
+def test_direct_bounds_hold_the_estimate(capsys, rig_data):
+    # --bounds with --method direct were not applied: k11 came back outside them, "identifiable yes", with an interval
+    free = json.loads(run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                          "--json")[1])
+    k11 = free["parameters"]["k11"]
+    assert k11 < 1.38e6
+    lo = (k11 + 1.38e6) / 2  # bounds that contain the model's value (1.38e6, the start) but not this data's estimate
+    code, out, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
+                         "--bounds", f"k11={lo!r}:2e6")
+    assert code == 0, err
+    row = next(line for line in out.splitlines() if line.split()[:1] == ["k11"])
+    assert float(row.split()[1]) == pytest.approx(lo, rel=1e-5)  # printed with 6 digits
+    assert row.rstrip().endswith("NO (at a bound)")
+    assert "not determined" in row
+    assert f"WARNING: the data alone put k11 at {k11:.6g}" in out
+    assert err == ""  # said once, in the text
+
+
 def test_study_tabulates_mean_and_std_per_noise_level(capsys):
     code, out, err = run(capsys, "study", "builtin:two-mass-rig", "--method", "direct", "--unknowns", "k11,k22",
                          "--set", "k11=1.2e6", "--noise", "0,0.01", "--seeds", 2, "--duration", 1, "--json")

@@ -109,3 +109,42 @@ def test_reference_with_unknown_sensors_is_an_error(capsys, tmp_path):
     code, _, err = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "8")
     assert code == 1
     assert "sets[0].damping must list 2 number(s); got 1" in err
+
+
+SYMMETRIC = """\
+format: cappe.model/1
+name: symmetric
+parameters:
+  - {name: m, value: 2.0, kind: mass}
+  - {name: k, value: 1.0e6, kind: stiffness}
+bodies:
+  - {name: table, mass: m, inertia: {xx: 0.02, yy: 0.02, zz: 0.02}, dofs: [x, y]}
+elements:
+  - {name: a, bodies: [ground, table], at: [0, 0, 0], stiffness: {x: k, y: k}}
+"""
+
+
+def test_local_on_repeated_modes_warns_in_words(capsys, tmp_path):
+    # a raw "IllConditionedWarning: modes [(1, 0), (0, 1)] ..." with a source line came out before
+    model = tmp_path / "symmetric.yaml"
+    model.write_text(SYMMETRIC)
+    code, out, err = run(capsys, "sensitivity", str(model), "--local")
+    assert code == 0
+    # sqrt(k / m) / 2 pi = 112.54 Hz for both x and y
+    assert err.startswith("cappe: warning: model 'symmetric' has (nearly) equal frequencies (modes 1 and 2 at "
+                          "112.54 Hz)")
+    assert "The table re-solves the modes and is not affected" in err
+    assert "IllConditionedWarning" not in err
+    assert len(err.strip().splitlines()) == 1
+
+
+def test_sobol_says_when_n_is_too_small(capsys, tmp_path):
+    ref = tmp_path / "ref.json"
+    run(capsys, "model", "modes", "builtin:two-mass-rig", "--modal-out", str(ref), "--sensors", "n1:x,n2:x")
+    code, out, _ = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa", "8",
+                       "--criteria", "frequency")
+    assert code == 0
+    assert "WARNING: the ST values are too noisy to read at N = 8:" in out
+    code, out, _ = run(capsys, "sensitivity", "builtin:two-mass-rig", "--sobol", "--reference", str(ref), "--n-gsa",
+                       "8", "--criteria", "frequency", "--json")
+    assert json.loads(out)["noise"]["too_noisy"] is True

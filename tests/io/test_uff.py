@@ -195,8 +195,10 @@ def test_frf_round_trip_uniform_grid(tmp_path, binary):
 
 
 def test_frf_uneven_grid_exact_in_binary_six_digits_in_ascii(tmp_path):
-    freq = np.geomspace(1.0, 1000.0, 40)
-    frf = _frf_data(np.random.default_rng(5), freq)
+    # neither even nor log-spaced: lines from a log grid moved by up to 10 % of their step
+    rng = np.random.default_rng(5)
+    freq = np.geomspace(1.0, 1000.0, 40) * (1 + 0.01 * rng.uniform(-1, 1, 40))
+    frf = _frf_data(rng, freq)
     binary = read_uff_frf(write_uff_frf(tmp_path / "b.uff", frf, binary=True))
     np.testing.assert_array_equal(binary.freq, freq)
     np.testing.assert_array_equal(binary.H, frf.H)
@@ -828,3 +830,22 @@ def test_fe_normal_modes_from_uff_2414(tmp_path):
     np.testing.assert_allclose(data.sets[0].frequency, freq, rtol=1e-5)
     np.testing.assert_allclose(data.sets[0].damping, [0.01, 0.02, 0.0], atol=1e-7)
     np.testing.assert_allclose(data.sets[0].shapes.real, phi, rtol=1e-5, atol=1e-6)
+
+
+def test_ascii_log_spaced_frequencies_round_trip_exactly(tmp_path):
+    # `cappe model frf -o h.uff` writes np.geomspace lines; ASCII UFF 58 kept them to 6 digits (E13.5), a relative
+    # shift up to 5e-6: near a 0.01 % damped peak (half-power bandwidth 2e-4 f) that is a few % of |H|
+    freq = np.geomspace(7.3, 913.0, 257)
+    f_n, zeta = 123.456789, 1e-4  # a single mode written with numpy: H = 1 / (k (1 - r^2 + 2 i zeta r))
+    r = freq / f_n
+    h = (1.0 / (2.0e6 * (1 - r**2 + 2j * zeta * r)))[None, None, :]
+    path = write_uff_frf(tmp_path / "h.uff", FRFData(freq, h, ("F",), ("tool:x",)))
+    back = read_uff_frf(path)
+    # rebuilt from the ID line's x0 and xn: equal to a few ulps (rtol 4 eps, the writer's own test)
+    np.testing.assert_allclose(back.freq, freq, rtol=4 * np.finfo(float).eps, atol=0)
+    # the ordinates keep 12 digits at the lines they belong to
+    np.testing.assert_allclose(back.H, h, rtol=1e-11, atol=0)
+    # other programs read the file's own abscissa (6 digits), and a pyuff reader sees an uneven abscissa
+    dset = pyuff.UFF(str(path)).read_sets(0)
+    assert dset["abscissa_spacing"] == 0
+    np.testing.assert_allclose(dset["x"], freq, rtol=1e-5)

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import io
+import os
 import re
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -146,3 +149,36 @@ def test_animation_errors(tmp_path, plate):
     with pytest.raises(DataError, match=r"mode shapes must have one row per label \(2\); got shape \(3, 1\)"):
         animate_mode_shape(tmp_path / "m.gif", model=plate, mode=np.ones(3), sensors=["plate.x", "plate.y"])
     assert list(tmp_path.iterdir()) == []
+
+
+def test_html_player_buttons_show_their_icons_offline(tmp_path, plate):
+    # the player linked Font Awesome from a CDN: offline (and in a self-contained page) its nine buttons were blank
+    chromium = Path("/usr/bin/chromium")
+    if not chromium.exists():
+        if os.environ.get("CAPPE_REQUIRE_SERVICES") == "1":
+            pytest.fail(f"headless Chromium not installed at {chromium}")
+        pytest.skip(f"headless Chromium not installed at {chromium}")
+    playwright = pytest.importorskip("playwright.sync_api")
+    page_file = animate_mode_shape(tmp_path / "mode.html", model=plate, mode=plate.system().modes(), index=0,
+                                   n_frames=2, **SMALL)
+    assert "font-awesome" not in page_file.read_text(encoding="utf-8")  # nothing fetched from the network
+    requests: list[str] = []
+    with playwright.sync_playwright() as pw:
+        browser = pw.chromium.launch(executable_path=str(chromium), args=["--headless", "--no-sandbox",
+                                                                           "--disable-gpu"])
+        try:
+            page = browser.new_page()
+            page.route(re.compile(r"^https?://"), lambda route: (requests.append(route.request.url), route.abort()))
+            page.goto(page_file.resolve().as_uri())
+            buttons = page.locator(".anim-buttons button")
+            shots = [buttons.nth(k).screenshot() for k in range(buttons.count())]
+        finally:
+            browser.close()
+    assert requests == []
+    assert len(shots) == 9
+    for shot in shots:
+        with Image.open(io.BytesIO(shot)) as im:
+            gray = np.asarray(im.convert("L"), dtype=float)
+        h, w = gray.shape
+        inner = gray[h // 4 : 3 * h // 4, w // 4 : 3 * w // 4]  # inside the border: the icon or nothing
+        assert inner.min() < 128, "a button without a visible icon"  # dark ink on the light button face

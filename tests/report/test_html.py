@@ -110,3 +110,45 @@ def test_page_renders_in_chromium(tmp_path):
     assert len(widths) == 2
     assert min(widths) > 300
     assert not overflow  # nothing wider than the window
+
+
+def _rig_zeta(m1, m2, k11, k12, k22, c11, c22):
+    """Damping ratios of the two-mass rig, ascending frequency, from the eigenvalues of its state matrix written from
+    the physics (m1 on k11 to ground, m2 on k22 to ground, k12 between them; dampers c11, c22 to ground)."""
+    from scipy.linalg import eig
+
+    m = np.diag([m1, m2])
+    k = np.array([[k11 + k12, -k12], [-k12, k22 + k12]])
+    c = np.diag([c11, c22])
+    a = np.block([[np.zeros((2, 2)), np.eye(2)], [-np.linalg.solve(m, k), -np.linalg.solve(m, c)]])
+    lam = eig(a, right=False)
+    lam = lam[lam.imag > 0]
+    lam = lam[np.argsort(np.abs(lam))]
+    return -lam.real / np.abs(lam)
+
+
+def test_mode_table_shows_damping_ratios_measured_and_model(tmp_path):
+    # the issue asked for frequency and damping, measured and model, with their differences; the table had NDD only
+    from cappe.estimate import validate_identification
+    from cappe.modal import ModalEngine
+
+    rig = load_model("builtin:two-mass-rig")
+    truth = {"c11": 20.0, "c22": 4.0}
+    model = {"c11": 26.0, "c22": 4.0}
+    reference = ModalEngine(rig).modal_data(params=truth)
+    res = validate_identification(model=rig, params=model, reference=reference)
+    page = write_html_report(tmp_path / "r.html", result=_estimate(),
+                             validation={"validation": res, "identification": [], "permuted": []}).read_text()
+    header = re.search(r"<tr><th class=\"name\">position \(m\)</th>(.*?)</tr>", page).group(1)
+    assert "<th>zeta reference %</th><th>zeta model %</th><th>zeta difference %</th>" in header
+    table = page[page.index("zeta difference %"):]
+    rows = re.findall(r"<tr><td class=\"name\">[^<]*</td>((?:<td>[^<]*</td>)+)</tr>", table)[:2]
+    cells = [re.findall(r"<td>([^<]*)</td>", row) for row in rows]
+    nominal = dict(m1=1.39, m2=1.09, k11=1.38e6, k12=1.2e5, k22=2.4e5)
+    z_ref = _rig_zeta(**nominal, **truth)
+    z_model = _rig_zeta(**nominal, **model)
+    for r in range(2):
+        # printed to 4 significant digits (rtol 5e-4 covers the rounding)
+        np.testing.assert_allclose(float(cells[r][5]), 100 * z_ref[r], rtol=5e-4)
+        np.testing.assert_allclose(float(cells[r][6]), 100 * z_model[r], rtol=5e-4)
+        np.testing.assert_allclose(float(cells[r][7]), 100 * (z_model[r] / z_ref[r] - 1), rtol=5e-3)

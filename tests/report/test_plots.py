@@ -25,3 +25,32 @@ def test_estimation_plots_are_written(tmp_path):
     for path in files:
         assert path.stat().st_size > 5000  # a rendered figure, not an empty canvas
     assert sorted(p.name for p in tmp_path.iterdir()) == ["corr.png", "r.png", "traj.png"]
+
+
+def test_sobol_bars_say_what_st_is_and_when_n_is_too_small(tmp_path, monkeypatch):
+    # the bars were labelled "S1" and "ST" alone, and ST up to 2.7 was drawn without comment
+    import cappe.sensitivity._plots as plots
+    from cappe.sensitivity import SobolResult
+
+    drawn = {}
+
+    def keep(fig, path, **kwargs):
+        drawn["texts"] = [t.get_text() for t in fig.texts]
+        drawn["legend"] = [t.get_text() for lg in fig.legends for t in lg.get_texts()]
+        drawn["title"] = [lg.get_title().get_text() for lg in fig.legends]
+        return path
+
+    monkeypatch.setattr(plots, "_save", keep)
+    st = np.array([[2.7, 0.1, 0.0], [0.4, 0.5, 0.02]])
+    noisy = SobolResult(0.8 * st, np.full(st.shape, 0.3), st, np.full(st.shape, 0.3), ("a", "b", "c"),
+                        ("f1", "f2"), 16, 100, 0.95)
+    plots.sobol_plot(noisy, tmp_path / "s.png")
+    assert "ST, total index: alone and in interactions" in drawn["legend"]
+    assert "S1, first-order index: the parameter alone" in drawn["legend"]
+    assert drawn["title"] == ["Sobol indices, N = 16; whiskers: 95 % bootstrap intervals"]
+    assert any(t.startswith("Too noisy to read at N = 16: 1 of 6 ST estimates lie outside [0, 1]")
+               for t in drawn["texts"])
+    quiet = SobolResult(0.8 * st / 3, np.full(st.shape, 0.02), st / 3, np.full(st.shape, 0.02), ("a", "b", "c"),
+                        ("f1", "f2"), 4096, 100, 0.95)
+    plots.sobol_plot(quiet, tmp_path / "s.png")
+    assert not any("noisy" in t for t in drawn["texts"])

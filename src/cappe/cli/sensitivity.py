@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import argparse
 import sys
+import warnings
 
 import numpy as np
 
 from cappe.cli._common import ModelContext, UsageError, add_deprecated, add_model_options, emit, names, naming_file
-from cappe.exceptions import DataError, ModelError
+from cappe.exceptions import DataError, IllConditionedWarning, ModelError
 
 
 def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
@@ -63,7 +64,15 @@ def _local(ctx: ModelContext, args: argparse.Namespace) -> int:
 
     table = percentage_table(ctx.numeric, ctx.values, ctx.position, percent=args.percent,
                              parameters=names(args.parameters))
-    derivs = modal_sensitivity(ctx.numeric, ctx.values, ctx.position)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", IllConditionedWarning)
+        derivs = modal_sensitivity(ctx.numeric, ctx.values, ctx.position)
+    for w in caught:
+        if issubclass(w.category, IllConditionedWarning):
+            print(f"cappe: warning: {w.message}. The table re-solves the modes and is not affected; the normalized "
+                  "derivatives of --json are.", file=sys.stderr)
+        else:
+            warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     nf, nz = derivs.normalized()
     data = table.to_dict()
     data["normalized"] = {
@@ -100,6 +109,10 @@ def _sobol(ctx: ModelContext, args: argparse.Namespace) -> int:
              f"per position); parameters with ST > {args.threshold:g}:"]
     for output, params in significant.items():
         lines.append(f"  {output:<28} {', '.join(params) if params else '-'}")
+    noisy = result.sobol.noise_text()
+    if noisy:
+        data["noise"] = result.sobol.noise()
+        lines.append(f"WARNING: the ST values are {noisy}")
     if args.plot:
         lines.append(f"plot written to {args.plot}")
     emit(args, data, "\n".join(lines))

@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import warnings
 from collections.abc import Callable, Mapping, Sequence
+from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -50,7 +51,7 @@ import scipy.linalg as sla
 from numpy.typing import NDArray
 from scipy import signal
 from scipy.integrate import cumulative_simpson
-from scipy.optimize import least_squares
+from scipy.optimize import least_squares, lsq_linear
 
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator
@@ -79,8 +80,10 @@ class DirectEstimator(Estimator):
     Parameters
     ----------
     model, unknowns, bounds, start, values, rng
-        As for :class:`Estimator`. Bounds do not constrain the linear solution (they are reported when violated
-        and bound the Gauss-Newton search of non-linear unknowns).
+        As for :class:`Estimator`. Bounds constrain the estimate: where the least-squares solution of linear
+        unknowns lies outside them, the estimate is the optimum within them (bounded-variable least squares), its
+        unknowns at a bound are flagged without an interval and the unbounded values are said in a warning; they
+        bound the Gauss-Newton search of non-linear unknowns.
     inputs : sequence of str, optional
         Model inputs that act during the measurement; each needs a force channel of that name. Default: every
         model input. Inputs left out are taken as zero.
@@ -225,25 +228,42 @@ class DirectEstimator(Estimator):
                 weights = _residual_weights(a, b, theta, weights)
                 theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
                 history.append(space.mapping(theta))
+        message = "linear least squares" if self.instruments is None else f"instrumental variables ({self.instruments})"
+        outside = [
+            n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True) if not lo <= v <= hi
+        ]
+        at_bound: list[str] = []
+        if outside and np.all(np.isfinite(theta)):
+            free = theta
+            theta = _bounded(jac, theta, space.lower, space.upper)
+            if self.instruments is None:  # weight the DOFs by their residuals at the bounded optimum, as above
+                weights = _residual_weights(a, b, theta, weights)
+                jac = (a * weights[:, None, None]).reshape(-1, space.n)
+                theta = _bounded(jac, _weighted_lstsq(a, b, weights, space.start), space.lower, space.upper)
+            at_bound = [n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True)
+                        if v <= lo or v >= hi]
+            said = ", ".join(f"{n} at {free[space.names.index(n)]:.6g} (bounds [{space.lower[space.names.index(n)]:g}"
+                             f", {space.upper[space.names.index(n)]:g}])" for n in outside)
+            line = (f"the data alone put {said}: the estimate is the least-squares optimum within the bounds, "
+                    f"at a bound for {at_bound}; widen the bounds if they exclude the truth")
+            diagnostics["outside_bounds"] = outside
+            diagnostics["unbounded"] = {n: float(free[space.names.index(n)]) for n in outside}
+            diagnostics["at_bound"] = at_bound
+            diagnostics["warnings"] = [*diagnostics.get("warnings", []), line]
+            message += f"; estimate at a bound for {at_bound}"
+            warnings.warn(f"direct estimate outside the bounds for {outside}; {line}", DataWarning, stacklevel=4)
         residuals = ((b - a @ theta) * weights[:, None]).ravel()
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
+        if at_bound:  # an estimate held by its bound has no Gauss-Newton interval
+            held = np.isin(np.array(space.names), at_bound)
+            ci = unc.ci95.copy()
+            ci[held] = np.nan
+            unc = replace(unc, ci95=ci, identifiable=unc.identifiable & ~held)
+            diagnostics["practically_non_identifiable"] = dict.fromkeys(at_bound, "at a bound")
         diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
         diagnostics["iterations"] = len(history)
         if len(history) > 1:
             diagnostics["history"] = history
-        outside = [
-            n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True) if not lo <= v <= hi
-        ]
-        message = "linear least squares" if self.instruments is None else f"instrumental variables ({self.instruments})"
-        if outside:
-            diagnostics["outside_bounds"] = outside
-            message += f"; estimate outside its bounds for {outside}"
-            warnings.warn(
-                f"direct estimate outside the bounds for {outside}: "
-                f"{ {n: float(theta[space.names.index(n)]) for n in outside} }",
-                DataWarning,
-                stacklevel=4,
-            )
         success = bool(np.all(np.isfinite(theta)))
         if not success:
             message += "; the solution is not finite"
@@ -579,6 +599,16 @@ def _weighted_lstsq(a: Array, b: Array, weights: Array, p0: Array) -> Array:
     scale[scale == 0] = 1.0
     sol = np.linalg.lstsq(aw / scale, bw, rcond=None)[0]
     return np.asarray(p0 + sol / scale, dtype=float)
+
+
+def _bounded(jac: Array, theta: Array, lower: Array, upper: Array) -> Array:
+    """The least-squares optimum within the bounds: ``theta`` minimizes ``|J p - y|`` without them, so the bounded
+    optimum minimizes ``|J (p - theta)|`` (bounded-variable least squares on the column-scaled Jacobian)."""
+    scale = np.linalg.norm(jac, axis=0)
+    scale[scale == 0] = 1.0
+    js = jac / scale
+    sol = lsq_linear(js, js @ (theta * scale), bounds=(lower * scale, upper * scale), method="bvls")
+    return np.asarray(np.clip(sol.x / scale, lower, upper), dtype=float)
 
 
 def _residual_weights(a: Array, b: Array, theta: Array, weights: Array) -> Array:

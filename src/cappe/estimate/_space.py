@@ -136,7 +136,8 @@ class ParameterSpace:
                 raise ModelError(msg)
             value = float((start or {}).get(name, base[col]))
             if not (np.isfinite(value) and lo <= value <= hi):
-                msg = f"start of {name!r} = {value:g} lies outside its bounds [{lo:g}, {hi:g}]"
+                msg = (f"start of {name!r} = {value:g} lies outside its bounds [{lo:g}, {hi:g}]; give a start value "
+                       "inside them or bounds that contain it")
                 raise ModelError(msg)
             lower.append(lo)
             upper.append(hi)

@@ -77,6 +77,8 @@ class ValidationResult:
         Model mode (ascending frequency, 0-based) paired with each reference mode.
     model_frequency : ndarray, shape (m,)
         Natural frequency of the paired model mode (Hz).
+    reference_damping, model_damping : ndarray, shape (m,)
+        Damping ratios of the reference modes and of their paired model modes (dimensionless).
     macxp, nfd, ndd : ndarray, shape (m,)
         MACXP, natural frequency difference and natural damping difference of each pair (dimensionless).
     macxp_matrix : ndarray, shape (n_model, m)
@@ -100,6 +102,8 @@ class ValidationResult:
     reference_frequency: Array
     model_mode: NDArray[np.intp]
     model_frequency: Array
+    reference_damping: Array
+    model_damping: Array
     macxp: Array
     nfd: Array
     ndd: Array
@@ -153,6 +157,8 @@ class ValidationResult:
                 "reference_frequency": self.reference_frequency.tolist(),
                 "model_mode": self.model_mode.tolist(),
                 "model_frequency": self.model_frequency.tolist(),
+                "reference_damping": self.reference_damping.tolist(),
+                "model_damping": self.model_damping.tolist(),
                 "macxp": self.macxp.tolist(),
                 "nfd": self.nfd.tolist(),
                 "ndd": self.ndd.tolist(),
@@ -515,7 +521,8 @@ def validate_identification(
             "model": h_mod[:, o_best, i_best].copy()}
     return ValidationResult(
         position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
-        model_frequency=f_model, macxp=values, nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,
+        model_frequency=f_model, reference_damping=data_set.damping.copy(), model_damping=zeta_model, macxp=values,
+        nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,
         outputs=tuple(sensors), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
         overlay=kept, notes=notes,
     )

@@ -150,10 +150,15 @@ def derivatives(
     own = np.arange(n)[:, None] == index[None, :]
     repeated = (np.abs(denom) <= REPEATED_TOLERANCE * scale) & ~own
     if np.any(repeated & (lam_r[None, :] > 0)):
-        pairs = [(int(index[r]), int(s)) for s, r in zip(*np.nonzero(repeated & (lam_r[None, :] > 0)), strict=True)]
+        pairs = sorted({tuple(sorted((int(index[r]), int(s))))
+                        for s, r in zip(*np.nonzero(repeated & (lam_r[None, :] > 0)), strict=True)})
+        hz = np.sqrt(np.maximum(lam, 0.0)) / (2 * np.pi)
+        said = "; ".join(f"modes {a + 1} and {b + 1} at {hz[a]:.6g} Hz" for a, b in pairs[:3])
         warnings.warn(
-            f"modes {pairs[:3]} of model '{model.structure.name}' have (nearly) equal frequencies; their shape "
-            "derivatives are not unique (computed without the coupling between them)",
+            f"model '{model.structure.name}' has (nearly) equal frequencies ({said}{' ...' if len(pairs) > 3 else ''})"
+            ": their shape derivatives, and their frequency and damping derivatives for a parameter that splits the "
+            "frequency, depend on which shapes are chosen for it and are not unique (computed without the coupling "
+            "between them)",
             IllConditionedWarning,
             stacklevel=3,
         )

@@ -170,11 +170,45 @@ def _render(
         with atomic_path(path, suffix=".gif") as tmp:  # Pillow picks the format from the suffix
             anim.save(tmp, writer=PillowWriter(fps=fps), dpi=dpi)
     else:
-        player = anim.to_jshtml(fps=fps, embed_frames=True, default_mode="loop")
+        player = _offline_buttons(anim.to_jshtml(fps=fps, embed_frames=True, default_mode="loop"))
         head = f'<!DOCTYPE html>\n<html><head><meta charset="utf-8"><title>{html.escape(suptitle)}</title></head>'
         write_text(path, f"{head}<body>\n{player}\n</body></html>\n")
     fig.clear()
     return path
+
+
+#: Inline SVG icons (16 x 16, the button's text colour) for the Font Awesome icons of matplotlib's player: the page
+#: is self-contained, and the icon font it links from a CDN does not load offline, which left the buttons blank.
+_ICONS = {
+    "minus": '<rect x="3" y="7" width="10" height="2"/>',
+    "plus": '<rect x="3" y="7" width="10" height="2"/><rect x="7" y="3" width="2" height="10"/>',
+    "play": '<polygon points="4,2 14,8 4,14"/>',
+    "play fa-flip-horizontal": '<polygon points="12,2 2,8 12,14"/>',
+    "pause": '<rect x="3" y="2" width="4" height="12"/><rect x="9" y="2" width="4" height="12"/>',
+    "step-forward": '<polygon points="3,2 11,8 3,14"/><rect x="11" y="2" width="2" height="12"/>',
+    "step-backward": '<rect x="3" y="2" width="2" height="12"/><polygon points="13,2 5,8 13,14"/>',
+    "fast-forward": '<polygon points="1,2 7,8 1,14"/><polygon points="7,2 13,8 7,14"/>'
+                    '<rect x="13" y="2" width="2" height="12"/>',
+    "fast-backward": '<rect x="1" y="2" width="2" height="12"/><polygon points="9,2 3,8 9,14"/>'
+                     '<polygon points="15,2 9,8 15,14"/>',
+}
+
+
+def _offline_buttons(player: str) -> str:
+    """matplotlib's animation player with its Font Awesome icons drawn as inline SVG and the CDN link removed."""
+    import re
+
+    def icon(match: re.Match[str]) -> str:
+        shapes = _ICONS.get(match.group(1))
+        if shapes is None:  # an icon this table does not know: keep matplotlib's markup
+            return match.group(0)
+        return (f'<svg width="16" height="16" viewBox="0 0 16 16" fill="currentColor" aria-hidden="true" '
+                f'style="vertical-align: middle">{shapes}</svg>')
+
+    player = re.sub(r'<i class="fa fa-([a-z -]+?)"></i>', icon, player)
+    if "fa fa-" not in player:  # nothing left that needs the icon font
+        player = re.sub(r'<link rel="stylesheet"\s+href="[^"]*font-awesome[^"]*">', "", player)
+    return player
 
 
 # -- measured vs model motion -----------------------------------------------------------------------------------

@@ -290,39 +290,38 @@ def _sensitivity_map(gsa: Any, threshold: float, max_rows: int = 60) -> str:
 def _sobol_note(gsa: Any) -> str:
     """What total Sobol indices are, and whether this sample size estimates them well enough to read."""
     sobol = gsa.sobol
-    st = np.asarray(sobol.ST, dtype=float)
-    conf = np.asarray(sobol.ST_conf, dtype=float)
     text = ("<p class=note>The total Sobol index ST of a parameter is the share of an output's variance, over the "
             "parameter bounds, that involves that parameter alone or in interaction with others (dimensionless, "
             "between 0 and 1; the first-order index S1 counts it alone). An output whose ST is near 0 for a "
             "parameter carries no information on it. Estimated from "
             f"N = {sobol.n} base samples ({sobol.n * (len(sobol.names) + 2)} model runs); whiskers: "
             f"{100 * sobol.conf_level:g} % bootstrap intervals.</p>")
-    outside = int(np.sum((st > 1.05) | (st < -0.05)))
-    wide = int(np.sum(conf > 0.1))
-    if outside or wide:
-        text += (f"<p class=bad>Too noisy to read at N = {sobol.n}: {outside} of {st.size} ST estimates lie "
-                 f"outside [0, 1] (from {np.nanmin(st):.2g} to {np.nanmax(st):.2g}) and {wide} have "
-                 "intervals wider than +-0.1. Only a parameter's membership of the significant set is used here; "
-                 "for the values themselves run a larger sample (the error falls as 1/sqrt(N)).</p>")
+    noisy = sobol.noise_text()
+    if noisy:
+        text += (f"<p class=bad>{_e(noisy[0].upper() + noisy[1:])}. Only a parameter's membership of the significant "
+                 "set is used here.</p>")
     return text
 
 
 def _mode_table(results: Sequence[Any]) -> str:
-    """Per position and reference mode: frequencies measured and model, their difference, NDD and MACXP."""
+    """Per position and reference mode: frequencies and damping ratios, measured and model, their differences, and
+    MACXP."""
     rows = []
     for res in results:
         for r, f_ref in enumerate(res.reference_frequency):
             f_model = float(res.model_frequency[r])
+            z_ref, z_model = 100 * float(res.reference_damping[r]), 100 * float(res.model_damping[r])
+            z_diff = _num(100 * (z_model / z_ref - 1), "+.3g") if z_ref > 0 else "-"
             rows.append([_e(_label(res.position)), str(r + 1), str(int(res.model_mode[r]) + 1), _num(f_ref, ".5g"),
-                         _num(f_model, ".5g"), _num(100 * (f_model / f_ref - 1), "+.3g"),
-                         _num(100 * float(res.ndd[r]), ".3g"), _num(100 * float(res.macxp[r]), ".2f")])
+                         _num(f_model, ".5g"), _num(100 * (f_model / f_ref - 1), "+.3g"), _num(z_ref, ".4g"),
+                         _num(z_model, ".4g"), z_diff, _num(100 * float(res.macxp[r]), ".2f")])
     return ("<h3>Modes</h3><p class=note>Reference (measured or simulated) against the identified model, mode by "
-            "mode: natural frequencies in Hz and their difference; NDD, the natural damping difference "
-            "|zeta_model - zeta_ref| / zeta_ref; MACXP, shape agreement weighted by pole proximity (paper eq. 4; "
-            "100 % = identical mode).</p>"
-            + _table(["position (m)", "mode", "model mode", "f reference (Hz)", "f model (Hz)", "difference %",
-                      "NDD %", "MACXP %"], rows))
+            "mode: natural frequencies in Hz and damping ratios zeta in % of critical damping, each with the "
+            "model's difference from the reference in % of the reference value (for the damping ratio this is the "
+            "signed NDD, (zeta_model - zeta_ref) / zeta_ref; '-' where the reference mode is undamped); MACXP, "
+            "shape agreement weighted by pole proximity (paper eq. 4; 100 % = identical mode).</p>"
+            + _table(["position (m)", "mode", "model mode", "f reference (Hz)", "f model (Hz)", "f difference %",
+                      "zeta reference %", "zeta model %", "zeta difference %", "MACXP %"], rows))
 
 
 #: a MACXP below this is explained on the page
@@ -364,9 +363,8 @@ def _sobol_bars(gsa: Any, top: int, max_panels: int) -> str:
     with tempfile.TemporaryDirectory() as folder:
         target = Path(folder) / "sobol.png"
         sobol_plot(gsa.sobol, target, outputs=chosen, top=top)
-        return ("<p class=note>Bars per output (the outputs with the largest single ST): blue the first-order "
-                "index S1, orange the total index ST (dimensionless), black whiskers their bootstrap intervals."
-                "</p>" + _img(target.read_bytes(), "Sobol indices"))
+        return ("<p class=note>Bars per output (the outputs with the largest single ST); the legend above the "
+                "bars says what each is.</p>" + _img(target.read_bytes(), "Sobol indices"))
 
 
 def _statistics(label: str, stats: Mapping[str, Mapping[str, float]]) -> str:

@@ -92,17 +92,29 @@ def sobol_plot(result: Any, path: str | Path, *, outputs: Any = None, top: int =
     if unknown:
         msg = f"unknown outputs {unknown}; known: {', '.join(names[:10])}{' ...' if len(names) > 10 else ''}"
         raise ValueError(msg)
-    fig, axes = plt.subplots(len(chosen), 1, figsize=(7, 2.6 * len(chosen)), squeeze=False)
+    noisy = result.noise_text() if hasattr(result, "noise_text") else ""
+    head = 0.9 + (0.35 if noisy else 0.0)  # inches above the panels: the legend and the noise line
+    height = 2.6 * len(chosen) + head
+    fig, axes = plt.subplots(len(chosen), 1, figsize=(7, height), squeeze=False)
     width = 0.4
+    conf = f"{100 * result.conf_level:g} %" if hasattr(result, "conf_level") else "confidence"
     for ax, output in zip(axes[:, 0], chosen, strict=True):
         o = names.index(output)
         order = np.argsort(-np.nan_to_num(result.ST[o], nan=-np.inf), kind="stable")[:top]
         x = np.arange(order.size)
-        ax.bar(x - width / 2, result.S1[o, order], width, yerr=result.S1_conf[o, order], capsize=3, label="S1")
-        ax.bar(x + width / 2, result.ST[o, order], width, yerr=result.ST_conf[o, order], capsize=3, label="ST")
+        ax.axhspan(0.0, 1.0, color="0.93", zorder=0, label="range of an index, 0 to 1")
+        ax.bar(x - width / 2, result.S1[o, order], width, yerr=result.S1_conf[o, order], capsize=3,
+               label="S1, first-order index: the parameter alone")
+        ax.bar(x + width / 2, result.ST[o, order], width, yerr=result.ST_conf[o, order], capsize=3,
+               label="ST, total index: alone and in interactions")
         ax.set_xticks(x, [result.names[j] for j in order], rotation=30, ha="right", fontsize=8)
-        ax.set_ylabel("index")
+        ax.set_ylabel("share of output variance")
         ax.set_title(output, fontsize=9)
         ax.grid(True, axis="y", alpha=0.3)
-    axes[0, 0].legend(loc="best", fontsize=8)
-    return _save(fig, path)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="upper center", ncol=2, fontsize=8, frameon=False,
+               title=f"Sobol indices, N = {result.n}; whiskers: {conf} bootstrap intervals", title_fontsize=8)
+    if noisy:
+        fig.text(0.5, 1 - 0.78 / height, noisy[0].upper() + noisy[1:], ha="center", va="top", fontsize=7,
+                 color="#b00020", wrap=True)
+    return _save(fig, path, rect=(0, 0, 1, 1 - head / height))

@@ -222,6 +222,10 @@ def _readonly(*arrays: NDArray[Any] | None) -> None:
 # ---------------------------------------------------------------------------------------------------------------
 
 
+#: An ST interval wider than +- this is too noisy to read the value (:meth:`SobolResult.noise`).
+NOISY_HALF_WIDTH = 0.1
+
+
 @dataclass(frozen=True, eq=False)
 class SobolResult:
     """Sobol' indices of every output with respect to every parameter, with bootstrap confidence intervals.
@@ -293,6 +297,57 @@ class SobolResult:
             msg = f"by must be 'ST' or 'S1'; got {by!r}"
             raise ModelError(msg)
         return _top(self.ST if by == "ST" else self.S1, self.names, self.output_names, k)
+
+    def noise(self, *, width: float | None = None) -> dict[str, Any]:
+        """Whether the sample size estimates ST well enough to read the values: the count of ST estimates outside
+        [0, 1] (by more than 0.05) and of ST intervals wider than +-``width``.
+
+        A total index is a fraction of a variance, so an estimate outside [0, 1] is sampling noise; its error falls
+        as ``1 / sqrt(n)``.
+
+        Parameters
+        ----------
+        width : float, optional
+            Largest readable half-width of an ST interval (dimensionless; default :data:`NOISY_HALF_WIDTH`).
+
+        Returns
+        -------
+        dict
+            ``outside`` and ``wide`` (counts), ``count`` (finite ST estimates), ``min`` and ``max`` (of ST),
+            ``too_noisy`` (either count nonzero).
+
+        Examples
+        --------
+        >>> st = np.array([[2.7, 0.1]])
+        >>> res = SobolResult(st, st, st, np.full((1, 2), 0.3), ("a", "b"), ("f1",), 16, 100, 0.95)
+        >>> res.noise()["outside"], res.noise()["too_noisy"]
+        (1, True)
+        """
+        limit = NOISY_HALF_WIDTH if width is None else float(width)
+        st = np.asarray(self.ST, dtype=float)
+        conf = np.asarray(self.ST_conf, dtype=float)
+        finite = np.isfinite(st)
+        outside = int(np.sum(finite & ((st > 1.05) | (st < -0.05))))
+        wide = int(np.sum(np.isfinite(conf) & (conf > limit)))
+        return {"outside": outside, "wide": wide, "count": int(finite.sum()),
+                "min": float(np.min(st[finite])) if finite.any() else float("nan"),
+                "max": float(np.max(st[finite])) if finite.any() else float("nan"),
+                "too_noisy": bool(outside or wide)}
+
+    def noise_text(self) -> str:
+        """One line saying that this sample size is too noisy to read the ST values, or ``""`` when it is not.
+
+        Returns
+        -------
+        str
+            The line (no trailing newline).
+        """
+        check = self.noise()
+        if not check["too_noisy"]:
+            return ""
+        return (f"too noisy to read at N = {self.n}: {check['outside']} of {check['count']} ST estimates lie "
+                f"outside [0, 1] (from {check['min']:.2g} to {check['max']:.2g}) and {check['wide']} have "
+                f"intervals wider than +-{NOISY_HALF_WIDTH:g}; run a larger N (the error falls as 1/sqrt(N))")
 
     def to_dict(self) -> dict[str, Any]:
         """Plain-Python dictionary (lists of floats, NaN where undefined); X and Y are not included."""
