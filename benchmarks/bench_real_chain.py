@@ -161,13 +161,14 @@ def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool
                   str(work / "map.csv")]
     else:
         extra += ["--truth", str(work / "truth.json")]
+    result = work / ("result_frf.json" if frf else "result.json")  # both stay side by side in a kept folder
     t_identify = time.perf_counter()
     text = cappe("identify", MODEL, "--reference", *(str(work / f"z{j + 1}.json") for j in range(len(positions))),
-                 "--validation", HELD_OUT, "--permutations", "0", "-o", str(work / "result.json"), *extra)
+                 "--validation", HELD_OUT, "--permutations", "0", "-o", str(result), *extra)
     t_identify = time.perf_counter() - t_identify
     t_chain = time.perf_counter() - t0
     (work / ("identify_frf.txt" if frf else "identify.txt")).write_text(text)
-    doc = json.loads((work / "result.json").read_text())
+    doc = json.loads(result.read_text())
     kinds = {n: structure.parameter(n).kind for n in truth}
     errors = {n: 100 * (doc["parameters"][n] / truth[n] - 1) for n in truth}
     ci = doc["uncertainty"]["ci95"]

@@ -130,6 +130,8 @@ def test_frf_refinement_brings_damping_within_target(chain, tmp_path, capsys):
     assert [p["position"] for p in frf_doc["positions"]] == [{"z": 0.0}, {"z": 0.25}]  # not the held-out one
     assert "refined against measured FRFs" in out.out
     assert "chi2/dof" in out.out
+    assert "sandwich over" in out.out
+    assert "fitted lines at one position" in out.out
     # the held-out position: FRAC and CSF against its measured FRFs, in the text
     assert doc["diagnostics"]["validation"]["validation"]["frf_source"] == "measured FRFs"
     assert "FRAC and CSF against the measured FRFs" in out.out

@@ -46,7 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                         "reference sets (or placed by --frf-position); channels mapped by --sensor-map. At "
                         "identification positions every unknown is refined against them after the modal stages "
                         "(complex-log residuals weighted by the data's own noise); at the validation position FRAC "
-                        "and CSF compare the model with them")
+                        "and CSF compare the model with them (unless --truth is given)")
     p.add_argument("--frf-position", nargs="+", metavar="AXIS=VALUE,...",
                    help="the axis position of each --frf file, in their order (default: the reference sets' order)")
     p.add_argument("--validation", metavar="AXIS=VALUE,...",

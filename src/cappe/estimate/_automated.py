@@ -41,8 +41,14 @@ The pipeline (paper Fig. 1), for reference modes at several axis positions, one 
    uncertainty and identifiability. Stages 1-3 use the first-order modes (light damping, assumption A1), whose
    difference from exact complex modes (mode complexity from non-proportional damping) would otherwise bias
    the estimates by up to about 1 % on closely spaced modes.
+
+   **With measured FRFs** (``frf``) at identification positions, all unknowns are then fitted to them
+   (:mod:`cappe.estimate._frf_refinement`: complex-log residuals weighted by the data's own noise, started at the
+   joint refinement, which found the basin): the FRFs settle what extracted modes cannot (mode complexity, damping
+   that barely moves an extracted damping ratio). Its estimate and uncertainty are the final ones.
 5. **Validation** (:func:`validate_identification`) at the held-out position and at the identification positions:
-   FRAC, CSF, MACXP, NDD statistics (paper Tables 2-5); and the permuted-damping comparison (Fig. 7): the
+   FRAC, CSF, MACXP, NDD statistics (paper Tables 2-5; FRAC and CSF against the measured FRFs where ``frf`` has
+   them and ``truth`` is not given); and the permuted-damping comparison (Fig. 7): the
    identified damping unknowns' factors from their start (preliminary) values, reassigned to other damping
    unknowns at random, give models whose validation criteria show what the damping identification is worth.
 

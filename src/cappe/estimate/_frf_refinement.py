@@ -61,7 +61,8 @@ from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
 from cappe.systems.modal import ModalDataSet
 
-__all__ = ["FRFRefinement", "FRFRefinementProblem", "MeasuredFRF", "frf_noise", "model_frf", "resonance_lines"]
+__all__ = ["FRFRefinement", "FRFRefinementProblem", "MeasuredFRF", "frf_noise", "model_frf", "refine_against_frf",
+           "resonance_lines"]
 
 Array = NDArray[np.float64]
 CArray = NDArray[np.complex128]
@@ -517,7 +518,8 @@ def refine_against_frf(*, method: str, model: NumericModel, space: ParameterSpac
         msg = "the FRF refinement ended at a non-finite estimate"
         raise ModelError(msg)
     r = problem.residuals(values)
-    est = robust_uncertainty(est, problem.jacobian(values), r, problem.groups())
+    est = robust_uncertainty(est, problem.jacobian(values), r, problem.groups(),
+                             clusters=f"blocks of {CLUSTER_LINES} fitted lines at one position (all channels)")
     cost = float(r @ r)
     dof = max(r.size - space.n, 1)
     chi2 = cost / dof

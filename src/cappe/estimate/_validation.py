@@ -553,7 +553,7 @@ def validate_identification(
     frac_v, csf_v = _line_criteria(h_mod, h_ref)
     if overlay is not None:
         if overlay[0] not in out_names or overlay[1] not in channels_in:
-            msg = f"overlay {overlay} must name an FRF output channel and an FRF input channel {channels_in}"
+            msg = f"overlay {overlay} must name a reference channel and an FRF input channel {channels_in}"
             raise DataError(msg)
         o_best, i_best = out_names.index(overlay[0]), channels_in.index(overlay[1])
     else:
