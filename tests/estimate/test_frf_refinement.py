@@ -232,3 +232,31 @@ def test_windowed_or_unmapped_frfs_are_refused():
     foreign = FRFData(np.arange(1, 51.0), h, ("1:x",), ("1:x", "2:y"))
     with pytest.raises(DataError, match=r"f\.uff: no FRF output is a sensor channel"):
         FRFRefinementProblem(machine, space, [MeasuredFRF({"z": 0.0}, foreign, "f.uff")], [ref])
+
+
+def test_validation_against_measured_frfs():
+    """FRAC and CSF against measured FRFs (the independent generator's, 2 % noise): near one at the truth, clearly
+    lower for a model with one stiffness 30 % off; the criteria are those of cappe.correlate (FRAC of one FRF)."""
+    from cappe.correlate import frac
+    from cappe.estimate import validate_identification
+
+    machine = NumericModel(load_model(MODEL))
+    rng = np.random.default_rng(5)
+    acc = accelerance(machine, TRUTH, -0.2)
+    noisy = acc * (1 + NOISE * (rng.standard_normal(acc.shape) + 1j * rng.standard_normal(acc.shape)) / np.sqrt(2))
+    labels = [f"{s}:{d}" for s in SENSORS for d in "xyz"]
+    data = FRFData(LINES, noisy, tuple(f"{n}:{d}" for n, d in REFERENCES), tuple(labels),
+                   ("acceleration",) * len(labels))
+    ref = ModalEngine(machine).modal_data([{"z": -0.2}], params=TRUTH)
+    good = validate_identification(model=machine, params=TRUTH, reference=ref, measured=data)
+    assert good.frf_source == "measured FRFs"
+    assert good.outputs == tuple(labels)
+    keep = LINES <= 1.25 * ref.sets[0].frequency.max()
+    assert good.freq.size == int(np.count_nonzero(keep))
+    # FRAC of one FRF as cappe.correlate computes it, from the generator's noisy FRF and the truth's
+    assert good.frac[12, 0] == pytest.approx(float(frac(acc[12, 0, keep], noisy[12, 0, keep])), abs=1e-9)
+    assert good.statistics()["frac"]["median"] > 0.999  # 2 % noise: 1 - FRAC about 4e-4 (noise power)
+    assert good.statistics()["csf"]["median"] > 0.98
+    bad = validate_identification(model=machine, params={**TRUTH, "me_kx": 1.3 * TRUTH["me_kx"]}, reference=ref,
+                                  measured=data)
+    assert bad.statistics()["frac"]["worst"] < good.statistics()["frac"]["worst"] - 0.2
