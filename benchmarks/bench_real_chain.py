@@ -21,8 +21,11 @@ Reported per truth: stiffness and damping errors (worst, median), how many 95 % 
 chain's wall time, and the warnings the text output showed. Targets (issue 20): stiffness worst <= 3 %, median
 <= 0.5 %, damping worst <= 25 %, coverage >= 90 %, chain <= 3 min.
 
-``python -m benchmarks.bench_real_chain [RUNS] [--quick] [--keep=DIR]`` (default 3 truths; ``--quick``: one
-truth, the identification at n_gsa 256, n_opt 20; ``--keep``: the files of every truth stay in DIR/truthN).
+``python -m benchmarks.bench_real_chain [RUNS] [--quick] [--keep=DIR] [--frf] [--reuse=DIR]`` (default 3 truths;
+``--quick``: one truth, the identification at n_gsa 256, n_opt 20; ``--keep``: the files of every truth stay in
+DIR/truthN; ``--frf``: ``identify --frf`` with the measured UFF files and without ``--truth``, so that the held-out
+position is validated against its measured FRFs, ``results/real_chain_frf.json``; ``--reuse``: the files a
+``--keep`` run left in DIR, without generating and extracting again).
 ``--compare=DIR`` then measures realized against complex shapes in the final refinement on those files
 (:func:`compare_shapes`, ``results/real_chain_shapes.json``).
 """
@@ -125,31 +128,47 @@ def cappe(*argv: str) -> str:
     return done.stdout + done.stderr
 
 
-def run_truth(seed: int, work: Path, quick: bool) -> dict[str, Any]:
-    """Generate, write, extract and identify for one random truth; errors against it."""
+def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool = False) -> dict[str, Any]:
+    """Generate, write, extract and identify for one random truth; errors against it.
+
+    ``frf``: identify with ``--frf`` (the measured UFF files of every position, the sensor map; no ``--truth``, so
+    the held-out position is validated against its measured FRFs). ``reuse``: the UFF and modal files a ``--keep``
+    run left in ``work`` (same seed) are used again; generation and extraction are skipped (``extract_s`` None).
+    """
     structure = load_model(MODEL)
     machine = NumericModel(structure)
     truth = draw_truth(machine, seed)
     rng = np.random.default_rng(seed + 1000)
-    (work / "truth.json").write_text(json.dumps(truth))
-    write_sensor_map(work / "map.csv")
     positions = structure.axes[0].positions
-    t_gen = time.perf_counter()
-    for j, z in enumerate(positions):
-        write_foreign_uff(work / f"z{j + 1}.uff", accelerance(machine, truth, {"z": z}), rng)
-    t_gen = time.perf_counter() - t_gen
+    t_gen: float | None = None
+    t_extract: float | None = None
     t0 = time.perf_counter()
-    texts = []
-    for j, z in enumerate(positions):
-        texts.append(cappe("extract-modes", str(work / f"z{j + 1}.uff"), "--band", BAND, "--sensor-map",
-                           str(work / "map.csv"), "--position", f"z={z}", "-o", str(work / f"z{j + 1}.json")))
-    t_extract = time.perf_counter() - t0
+    if not reuse:
+        (work / "truth.json").write_text(json.dumps(truth))
+        write_sensor_map(work / "map.csv")
+        t_gen = time.perf_counter()
+        for j, z in enumerate(positions):
+            write_foreign_uff(work / f"z{j + 1}.uff", accelerance(machine, truth, {"z": z}), rng)
+        t_gen = time.perf_counter() - t_gen
+        t0 = time.perf_counter()
+        for j, z in enumerate(positions):
+            cappe("extract-modes", str(work / f"z{j + 1}.uff"), "--band", BAND, "--sensor-map",
+                  str(work / "map.csv"), "--position", f"z={z}", "-o", str(work / f"z{j + 1}.json"))
+        t_extract = time.perf_counter() - t0
     extra = ["--n-gsa", "256", "--n-opt", "20"] if quick else []
+    if frf:
+        extra += ["--frf", *(str(work / f"z{j + 1}.uff") for j in range(len(positions))), "--sensor-map",
+                  str(work / "map.csv")]
+    else:
+        extra += ["--truth", str(work / "truth.json")]
+    result = work / ("result_frf.json" if frf else "result.json")  # both stay side by side in a kept folder
+    t_identify = time.perf_counter()
     text = cappe("identify", MODEL, "--reference", *(str(work / f"z{j + 1}.json") for j in range(len(positions))),
-                 "--validation", HELD_OUT, "--truth", str(work / "truth.json"), "--permutations", "0",
-                 "-o", str(work / "result.json"), *extra)
+                 "--validation", HELD_OUT, "--permutations", "0", "-o", str(result), *extra)
+    t_identify = time.perf_counter() - t_identify
     t_chain = time.perf_counter() - t0
-    doc = json.loads((work / "result.json").read_text())
+    (work / ("identify_frf.txt" if frf else "identify.txt")).write_text(text)
+    doc = json.loads(result.read_text())
     kinds = {n: structure.parameter(n).kind for n in truth}
     errors = {n: 100 * (doc["parameters"][n] / truth[n] - 1) for n in truth}
     ci = doc["uncertainty"]["ci95"]
@@ -164,8 +183,12 @@ def run_truth(seed: int, work: Path, quick: bool) -> dict[str, Any]:
         "covered": int(sum(covered.values())), "n_unknowns": len(covered),
         "not_covered": sorted(n for n, c in covered.items() if not c),
         "negative_lower_bounds": sorted(n for n in truth if ci[n][0] < 0),
-        "modes_extracted": n_modes, "generate_s": t_gen, "extract_s": t_extract, "chain_s": t_chain,
+        "modes_extracted": n_modes, "generate_s": t_gen, "extract_s": t_extract, "identify_s": t_identify,
+        "chain_s": t_chain, "frf": frf,
         "warnings": [line for line in text.splitlines() if "warning" in line.lower()],
+        "validation": doc["diagnostics"]["validation"]["validation"]["statistics"],
+        "validation_source": doc["diagnostics"]["validation"]["validation"]["frf_source"],
+        "chi2_dof": (doc["diagnostics"].get("frf_refinement") or {}).get("chi2_dof"),
         "errors_pct": errors,
     }
 
@@ -221,18 +244,23 @@ def main(argv: list[str]) -> dict[str, Any]:
     numbers = [a for a in argv if not a.startswith("-")]
     runs = 1 if quick and not numbers else int(numbers[0]) if numbers else 3
     keep = next((a.split("=", 1)[1] for a in argv if a.startswith("--keep=")), None)
+    reuse = next((a.split("=", 1)[1] for a in argv if a.startswith("--reuse=")), None)
+    frf = "--frf" in argv
     results = []
     for seed in range(runs):
         with tempfile.TemporaryDirectory() as tmp:
-            work = Path(tmp) if keep is None else Path(keep) / f"truth{seed}"
+            folder = keep if reuse is None else reuse
+            work = Path(tmp) if folder is None else Path(folder) / f"truth{seed}"
             work.mkdir(parents=True, exist_ok=True)
-            r = run_truth(seed, work, quick)
+            r = run_truth(seed, work, quick, frf=frf, reuse=reuse is not None)
         results.append(r)
         print(f"truth {seed}: stiffness worst {r['stiffness_worst_pct']:.2f} % "
               f"median {r['stiffness_median_pct']:.2f} %,"
               f" damping worst {r['damping_worst_pct']:.1f} % median {r['damping_median_pct']:.1f} %, covered "
-              f"{r['covered']}/{r['n_unknowns']} (missed {r['not_covered']}), modes {r['modes_extracted']}, chain "
-              f"{r['chain_s']:.0f} s (extract {r['extract_s']:.0f} s), warnings {len(r['warnings'])}")
+              f"{r['covered']}/{r['n_unknowns']} (missed {r['not_covered']}), modes {r['modes_extracted']}, "
+              f"identify {r['identify_s']:.0f} s, extract {r['extract_s'] or float('nan'):.0f} s, "
+              f"warnings {len(r['warnings'])}, held-out FRAC worst "
+              f"{100 * r['validation']['frac']['worst']:.1f} % ({r['validation_source']}), chi2/dof {r['chi2_dof']}")
         for line in r["warnings"]:
             print("   ", line)
     summary = {
@@ -241,10 +269,11 @@ def main(argv: list[str]) -> dict[str, Any]:
         "damping_worst_pct": max(r["damping_worst_pct"] for r in results),
         "coverage": sum(r["covered"] for r in results) / sum(r["n_unknowns"] for r in results),
         "chain_s_max": max(r["chain_s"] for r in results),
+        "identify_s_max": max(r["identify_s"] for r in results),
     }
     print("summary:", json.dumps(summary))
     if not quick:
-        write_results("real_chain", [*results, {"summary": summary}])
+        write_results("real_chain_frf" if frf else "real_chain", [*results, {"summary": summary}])
     return {"runs": results, "summary": summary}
 
 

@@ -38,8 +38,17 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                         "the sets of all files are one reference, told apart by their 'position' (two sets at one "
                         "position are an error), at the sensors the files share")
     p.add_argument("--sensor-map", metavar="MAP.csv",
-                   help="CSV 'channel,sensor' naming the model sensor channel of each reference sensor label (e.g. "
-                        "5:-z,table_fl:z); negative measured directions are flipped")
+                   help="CSV 'channel,sensor' naming the model sensor channel of each reference sensor label and --frf "
+                        "channel (e.g. 5:-z,table_fl:z); negative measured directions are flipped; reference files "
+                        "already at the map's model channels (extract-modes --sensor-map) are kept as they are")
+    p.add_argument("--frf", nargs="+", metavar="FILE.uff",
+                   help="measured FRFs (UFF 58, CSV or .npz), one file per reference position, in the order of the "
+                        "reference sets (or placed by --frf-position); channels mapped by --sensor-map. At "
+                        "identification positions every unknown is refined against them after the modal stages "
+                        "(complex-log residuals weighted by the data's own noise); at the validation position FRAC "
+                        "and CSF compare the model with them (unless --truth is given)")
+    p.add_argument("--frf-position", nargs="+", metavar="AXIS=VALUE,...",
+                   help="the axis position of each --frf file, in their order (default: the reference sets' order)")
     p.add_argument("--validation", metavar="AXIS=VALUE,...",
                    help="position held out for validation, e.g. z=-0.294; 'none' to identify from every position "
                         "(default: the reference's first position when it has two or more)")
@@ -126,14 +135,19 @@ def combined_reference(paths: list[str], sensor_map: str | None = None) -> tuple
 
     from cappe.exceptions import DataError
     from cappe.io import read_modal_data
-    from cappe.io.sensor_map import map_modal_data, read_sensor_map
+    from cappe.io.sensor_map import channel_sign, map_modal_data, read_sensor_map
     from cappe.systems.modal import ModalData
 
     mapping = read_sensor_map(sensor_map) if sensor_map else None
     notes: list[str] = []
     parts = []
+    targets = {channel_sign(v)[0] for v in mapping.values()} if mapping else set()
     for path in paths:
-        data, more = map_modal_data(read_modal_data(path), mapping, sensor_map or "")
+        data = read_modal_data(path)
+        more: list[str] = []
+        # a file extract-modes wrote with this map is at the model's channels already (the map is there for --frf)
+        if mapping is None or not all(s in targets for s in data.sensors):
+            data, more = map_modal_data(data, mapping, sensor_map or "")
         notes += [f"{path}: {line}" for line in more]
         parts.append((path, data))
     common = [s for s in parts[0][1].sensors if all(s in d.sensors for _, d in parts[1:])]
@@ -157,6 +171,45 @@ def combined_reference(paths: list[str], sensor_map: str | None = None) -> tuple
             sets.append(replace(data_set, shapes=data_set.shapes[rows]))
     source = paths[0] if len(paths) == 1 else ", ".join(paths)
     return ModalData(tuple(common), tuple(sets), source), notes
+
+
+def measured_frfs(paths: list[str] | None, positions: list[str] | None, reference: Any,
+                  sensor_map: str | None = None) -> tuple[list[Any], list[str]]:
+    """The --frf files as MeasuredFRF at model sensor channels (the sensor map applied), each at its position: the
+    --frf-position given for it, else the position of the reference set of the same rank; and the notes a user
+    should see."""
+    from cappe.estimate._frf_refinement import MeasuredFRF
+    from cappe.exceptions import DataError
+    from cappe.io import read_frf
+    from cappe.io.sensor_map import apply_sensor_map, read_sensor_map
+
+    if not paths:
+        if positions:
+            msg = "--frf-position needs --frf files"
+            raise UsageError(msg)
+        return [], []
+    if positions is not None and len(positions) != len(paths):
+        msg = f"--frf-position gives {len(positions)} positions for {len(paths)} --frf files; give one per file"
+        raise UsageError(msg)
+    if positions is None and len(paths) > len(reference.sets):
+        msg = (f"--frf gives {len(paths)} files but the reference has {len(reference.sets)} positions; place them "
+               "with --frf-position")
+        raise UsageError(msg)
+    mapping = read_sensor_map(sensor_map) if sensor_map else None
+    out, notes = [], []
+    for k, path in enumerate(paths):
+        where = (number_pairs([v for v in positions[k].split(",") if v.strip()], "--frf-position")
+                 if positions is not None else dict(reference.sets[k].position))
+        try:
+            data, more = apply_sensor_map(read_frf(path), mapping, sensor_map or "")
+        except DataError as exc:
+            if path in str(exc):  # the reader's message names the file already
+                raise
+            msg = f"{path}: {exc}"
+            raise DataError(msg) from exc
+        notes += [f"{path}: {line}" for line in more]
+        out.append(MeasuredFRF(dict(where), data, path))
+    return out, notes
 
 
 def run(args: argparse.Namespace) -> int:
@@ -185,6 +238,8 @@ def run(args: argparse.Namespace) -> int:
     if truth is not None:
         structure.resolve_parameters(truth)
     reference, notes = combined_reference(args.reference, args.sensor_map)
+    measured, frf_notes = measured_frfs(args.frf, args.frf_position, reference, args.sensor_map)
+    notes += frf_notes
     validation = _position(args.validation, reference)
     if args.validation is None and validation is not None:
         notes.append(f"validation position {validation} chosen by default (the reference's first set); "
@@ -202,7 +257,7 @@ def run(args: argparse.Namespace) -> int:
         n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
         n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args),
         overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, shapes=args.shapes,
-        progress=progress,
+        progress=progress, frf=measured or None,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -248,13 +303,26 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     lines += _parameter_rows(estimate, truth)
     lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
     diag = estimate.diagnostics
+    frf = result.frf
+    if frf is not None:
+        lines.append(f"refined against measured FRFs at {_where_all(p['position'] for p in frf.positions)}: "
+                     f"{frf.n_residuals} residuals (complex log: log-magnitude and phase) on "
+                     f"{', '.join(str(p['lines']) for p in frf.positions)} lines, weighted by {frf.noise}")
+        lines.append(f"  FRF residual / data noise: chi2/dof {frf.chi2_dof:.3g} (1: a fit down to the noise); "
+                     f"cost {frf.cost_before:.4g} at the modal estimate -> {frf.cost_after:.4g}")
     if "uncertainty" in diag:
-        lines.append(f"uncertainty: {diag['uncertainty']['std']}; 95 % intervals on a log scale; residuals "
-                     f"weighted by {diag.get('weighting', 'the weights')}, {diag.get('shapes', 'complex')} shapes")
+        weighted = ("FRF residuals weighted by the data's own noise" if frf is not None else
+                    f"residuals weighted by {diag.get('weighting', 'the weights')}, "
+                    f"{diag.get('shapes', 'complex')} shapes")
+        lines.append(f"uncertainty: {diag['uncertainty']['std']}; 95 % intervals on a log scale; {weighted}")
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())
-        if val.held.frf_source != "truth":
+        if val.held.frf_source == "measured FRFs":
+            lines.append(f"  (FRAC and CSF against the measured FRFs: {len(val.held.outputs)} outputs x "
+                         f"{len(val.held.inputs)} references, {val.held.freq.size} lines "
+                         f"{val.held.freq[0]:.4g}-{val.held.freq[-1]:.4g} Hz)")
+        elif val.held.frf_source != "truth":
             lines.append(f"  (FRAC and CSF from a modal synthesis over the {val.held.reference_frequency.size} "
                          "reference modes, not from measured FRFs: modes outside the reference band and residual "
                          "terms are left out)")

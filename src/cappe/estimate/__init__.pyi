@@ -18,6 +18,7 @@ from ._damping_least_squares import DampingLeastSquares, damping_least_squares
 from ._direct import DirectEstimator
 from ._exact_modal import ExactModalProblem
 from ._feature_map import FeatureMapEstimator
+from ._frf_refinement import FRFRefinement, FRFRefinementProblem, MeasuredFRF, refine_against_frf
 from ._hybrid import HybridEstimator
 from ._kalman import ExtendedKalmanEstimator, UnscentedKalmanEstimator
 from ._modal_updating import ModalUpdatingEstimator
@@ -55,6 +56,10 @@ __all__ = [
     "StiffnessSearch",
     "DampingLeastSquares",
     "ExactModalProblem",
+    "FRFRefinement",
+    "FRFRefinementProblem",
+    "MeasuredFRF",
+    "refine_against_frf",
     "SubproblemResult",
     "ValidationResult",
     "damping_least_squares",

@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 
 from cappe.estimate._base import CostFunction
 from cappe.estimate._damping_least_squares import DampingLeastSquares
+from cappe.estimate._frf_refinement import FRFRefinement
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._subproblems import StiffnessChoice, SubproblemResult
 from cappe.estimate._validation import ValidationResult, summarize
@@ -428,6 +429,9 @@ class AutomatedResult:
         Seconds per step and ``total``.
     warnings : tuple of str
         ``"Category: message"`` of the warnings the refinements raised.
+    frf : FRFRefinement or None
+        The refinement against measured FRFs at the identification positions (after the joint refinement), when
+        they were given: its estimate is then the final one.
     """
 
     method: str
@@ -446,13 +450,19 @@ class AutomatedResult:
     validation: IdentificationValidation
     timings: Mapping[str, float]
     warnings: tuple[str, ...]
+    frf: FRFRefinement | None = None
 
     @property
     def costs(self) -> dict[str, float | None]:
-        """Cost at the selection, after the stiffness refinement, after the damping step and at the end."""
-        return {"selection": None if self.refinement is None else self.refinement.cost_before,
-                "stiffness_refined": None if self.refinement is None else self.refinement.cost_after,
-                "after_damping_least_squares": self.joint.cost_before, "final": self.joint.cost_after}
+        """Cost at the selection, after the stiffness refinement, after the damping step and at the end of the
+        modal stages; with measured FRFs, the FRF cost at their end and after the FRF refinement."""
+        out: dict[str, float | None] = {
+            "selection": None if self.refinement is None else self.refinement.cost_before,
+            "stiffness_refined": None if self.refinement is None else self.refinement.cost_after,
+            "after_damping_least_squares": self.joint.cost_before, "final": self.joint.cost_after}
+        if self.frf is not None:
+            out.update({"frf_start": self.frf.cost_before, "frf_final": self.frf.cost_after})
+        return out
 
     def diagnostics(self) -> dict[str, Any]:
         """The steps' records, as the estimate's ``diagnostics`` hold them after the joint refinement's own."""
@@ -470,7 +480,10 @@ class AutomatedResult:
             "damping": None if self.damping is None else self.damping.to_dict(),
             "joint_refinement": self.joint.to_dict(),
             "stages": {"selection": _mapping(self.names, self.stiffness.values),
-                       "after_damping_least_squares": _mapping(self.names, self.after_damping)},
+                       "after_damping_least_squares": _mapping(self.names, self.after_damping),
+                       **({} if self.frf is None else {"after_modal_refinement": _mapping(self.names,
+                                                                                          self.joint.values)})},
+            "frf_refinement": None if self.frf is None else self.frf.to_dict(),
             "costs": self.costs,
             "timings": dict(self.timings),
             "validation": self.validation.to_dict(),
@@ -479,9 +492,10 @@ class AutomatedResult:
 
     @functools.cached_property
     def estimate(self) -> ParameterEstimate:
-        """All unknowns with the joint refinement's uncertainty, the steps' records in ``diagnostics``."""
-        return replace(self.joint.estimate, method=self.method,
-                       diagnostics={**self.joint.estimate.diagnostics, **self.diagnostics()})
+        """All unknowns with the last refinement's uncertainty (the FRF refinement's with measured FRFs, else the
+        joint refinement's), the steps' records in ``diagnostics``."""
+        last = self.joint.estimate if self.frf is None else self.frf.estimate
+        return replace(last, method=self.method, diagnostics={**last.diagnostics, **self.diagnostics()})
 
     def to_dict(self) -> dict[str, Any]:
         """The ``cappe.estimate/1`` document of the estimate (what ``cappe identify -o`` writes)."""

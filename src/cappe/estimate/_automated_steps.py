@@ -31,6 +31,7 @@ from cappe.estimate._automated_result import (
 from cappe.estimate._base import CostFunction, least_squares_fit
 from cappe.estimate._damping_least_squares import DampingLeastSquares, damping_least_squares
 from cappe.estimate._exact_modal import ExactModalProblem
+from cappe.estimate._frf_refinement import FRFRefinement, MeasuredFRF, refine_against_frf
 from cappe.estimate._modal_updating import MODAL_VARIANCE_FLOOR, ModalUpdatingEstimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -68,6 +69,17 @@ class Setup:
     runner: Executor
     n_workers: int | None
     progress: bool
+    frf: tuple[MeasuredFRF, ...] = ()  # measured FRFs, at most one per reference set (matched by position)
+
+    def measured_at(self, k: int) -> MeasuredFRF | None:
+        """The measured FRFs at the position of reference set ``k`` (None without)."""
+        position = self.model.structure.resolve_position(self.data.sets[k].position)
+        want = self.model.position_vector(position)
+        for item in self.frf:
+            have = self.model.position_vector(self.model.structure.resolve_position(item.position))
+            if np.allclose(have, want, rtol=0, atol=1e-9):
+                return item
+        return None
 
     @property
     def ident_ref(self) -> ModalData:
@@ -113,9 +125,14 @@ def run_pipeline(setup: Setup, rng: np.random.Generator) -> AutomatedResult:
     if damping is not None:
         current[[setup.space.names.index(n) for n in damping.names]] = damping.values
     joint = timed("joint_refinement", lambda: joint_refinement_step(setup, ident_ref, current, caught))
-    validation = timed("validation", lambda: validation_step(setup, joint.values, int(seeds[2])))
+    frf = None
+    if any(setup.measured_at(k) is not None for k in setup.ident):
+        frf = timed("frf_refinement", lambda: frf_refinement_step(setup, joint.values))
+    final = joint.values if frf is None else frf.values
+    validation = timed("validation", lambda: validation_step(setup, final, int(seeds[2])))
     timings["total"] = time.perf_counter() - t_total
-    caught.extend(f"IdentificationWarning: {line}" for line in identification_warnings(setup, joint, validation))
+    caught.extend(f"IdentificationWarning: {line}"
+                  for line in identification_warnings(setup, joint, validation, frf))
     data = setup.data
     return AutomatedResult(
         method=setup.method, names=setup.space.names, stiffness_unknowns=tuple(setup.modal_unknowns),
@@ -123,7 +140,7 @@ def run_pipeline(setup: Setup, rng: np.random.Generator) -> AutomatedResult:
         identification_positions=tuple(dict(data.sets[k].position) for k in setup.ident),
         validation_position=None if setup.held is None else dict(data.sets[setup.held].position),
         settings=setup.settings, gsa=gsa, stiffness=search, refinement=refinement, damping=damping,
-        after_damping=current, joint=joint, validation=validation, timings=timings, warnings=tuple(caught))
+        after_damping=current, joint=joint, validation=validation, timings=timings, warnings=tuple(caught), frf=frf)
 
 
 # -- step 1 -----------------------------------------------------------------------------------------------------
@@ -354,8 +371,17 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
         problem.pairing_report(values), values)
 
 
+def frf_refinement_step(setup: Setup, start: Array) -> FRFRefinement:
+    """All unknowns fitted to the measured FRFs at the identification positions, from the modal stages' estimate
+    (:mod:`cappe.estimate._frf_refinement`): the modal stages find the basin, the FRFs settle what extracted modes
+    cannot (issue 20)."""
+    pairs = [(item, setup.data.sets[k]) for k in setup.ident if (item := setup.measured_at(k)) is not None]
+    return refine_against_frf(method=setup.method, model=setup.model, space=setup.space,
+                              measured=[m for m, _ in pairs], reference=[s for _, s in pairs], start=start)
+
+
 def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: Array,
-                       groups: NDArray[np.intp]) -> ParameterEstimate:
+                       groups: NDArray[np.intp], clusters: str = "mode-position pairs") -> ParameterEstimate:
     """The estimate with an honest uncertainty: per unknown the larger of the model-based standard error and a
     cluster-robust (sandwich) one, and 95 % intervals on a log scale, which never include zero or negative values.
 
@@ -377,6 +403,8 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         Weighted residuals at the estimate.
     groups : ndarray of int, shape (n_r,)
         Cluster (mode-position pair) of every residual.
+    clusters : str
+        What a cluster is, for ``diagnostics["uncertainty"]``.
 
     Returns
     -------
@@ -399,7 +427,7 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         cov = bread @ (scores.T @ scores) @ bread * (g / (g - n))
         sandwich = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         std_rel = np.where(np.isfinite(std_rel), np.maximum(std_rel, sandwich), std_rel)
-        how = f"larger of model-based and cluster-robust sandwich over {g} mode-position pairs"
+        how = f"larger of model-based and cluster-robust sandwich over {g} {clusters}"
         dof = g - 1
     t = float(stats.t.ppf(0.975, dof))
     std = std_rel * np.abs(p)
@@ -421,12 +449,14 @@ MACXP_LEVEL = 0.8
 RESIDUAL_LEVEL = 4.0
 
 
-def identification_warnings(setup: Setup, joint: JointRefinement, validation: IdentificationValidation) -> list[str]:
+def identification_warnings(setup: Setup, joint: JointRefinement, validation: IdentificationValidation,
+                            frf: FRFRefinement | None = None) -> list[str]:
     """What a user must see about the result: poorly paired or unpaired modes, estimates at a bound, residuals
-    far above their stated noise, and the validation's notes (shapes not mass-normalized)."""
+    far above their stated noise, and the validation's notes (shapes not mass-normalized); with a refinement
+    against measured FRFs, its own (FRF residual far above the data's noise, estimates at a bound)."""
     out: list[str] = []
     model, space, data = setup.model, setup.space, setup.data
-    full = space.full(joint.values)
+    full = space.full(joint.values if frf is None else frf.values)
     results = ([] if validation.held is None else [validation.held]) + list(validation.identification)
     engine = ModalEngine(model, sensors=list(data.sensors))
     for res in results:
@@ -445,7 +475,7 @@ def identification_warnings(setup: Setup, joint: JointRefinement, validation: Id
                        "(not found in the test, or not excited or observed)")
         out.extend(res.notes)
     at_bound = list(joint.estimate.diagnostics.get("at_bound", []))
-    if at_bound:
+    if at_bound and frf is None:  # with FRFs the final estimate is theirs, and so is its warning
         out.append(f"estimates at a bound: {at_bound}; the data or the bounds do not determine them")
     diag = joint.estimate.diagnostics
     n_r = int(diag.get("residuals", 0))
@@ -454,6 +484,8 @@ def identification_warnings(setup: Setup, joint: JointRefinement, validation: Id
         if ratio > RESIDUAL_LEVEL:
             out.append(f"the residuals' mean square is {ratio:.3g} times their stated variance "
                        f"({diag['weighting']}): the noise is understated or the model does not fit the reference")
+    if frf is not None:
+        out.extend(frf.warnings)
     return out
 
 
@@ -472,8 +504,10 @@ def validation_step(setup: Setup, final: Array, seed: int) -> IdentificationVali
 
     def check(job: tuple[Array, int]) -> ValidationResult:
         params, k = job
+        measured = setup.measured_at(k) if truth is None else None
         return validate_identification(model=model, params=params, reference=data, position=data.sets[k].position,
-                                       truth=truth, overlay=settings.overlay)
+                                       truth=truth, overlay=settings.overlay,
+                                       measured=None if measured is None else measured.data)
 
     models: list[tuple[Array, int]] = [(space.full(final), k) for k in ([] if held is None else [held]) + ident]
     assignments = []

@@ -18,7 +18,10 @@ two FRF sets, stated in ``frf_source``:
 
 - ``"truth"`` (the reference was simulated from known parameters): both are the full model's receptances, at the
   true and at the identified parameters (all modes, viscous, hysteretic and gyroscopic terms);
-- ``"modal synthesis"`` (no truth): both are modal sums over the reference modes,
+- ``"measured FRFs"`` (no truth, measured FRFs at the position given): the measured FRFs at their own channels
+  (model sensor channels after a sensor map), output quantities and lines up to 1.25 times the highest reference
+  frequency, against the full model's FRFs there (all modes, residual effects included);
+- ``"modal synthesis"`` (no truth, no measured FRFs): both are modal sums over the reference modes,
   ``H_jk = sum_r psi_jr psi_kr / (omega_r^2 - omega^2 + 2 i zeta_r omega_r omega)``, with the reference's shapes
   and with the paired model modes (exact complex modes with ``exact``, else the first-order ones), frequency
   ``|lambda| / 2 pi`` and damping ratio ``-Re lambda / |lambda|``. The reference's shapes must be mass-normalized
@@ -45,11 +48,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 from cappe.correlate import ndd, nfd, pair_modes
+from cappe.estimate._frf_refinement import model_frf
 from cappe.exceptions import DataError
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, Structure
 from cappe.parallel import chunk_slices
 from cappe.systems.dynamic_stiffness import frf_lines
+from cappe.systems.frf import FRFData
+from cappe.systems.mechanical import DERIVATIVE_ORDER
 from cappe.systems.modal import ModalData, ModalDataSet
 
 __all__ = ["ValidationResult", "find_set", "model_receptance", "summarize", "validate_identification"]
@@ -90,7 +96,7 @@ class ValidationResult:
     frac, csf : ndarray, shape (n_out, n_in)
         FRF criteria per output and input channel (NaN where the reference FRF is negligible).
     frf_source : str
-        ``"truth"`` or ``"modal synthesis"`` (see the module notes).
+        ``"truth"``, ``"measured FRFs"`` or ``"modal synthesis"`` (see the module notes).
     overlay : dict
         One FRF for plots: ``output``, ``input`` (the driving point with the largest response) and the arrays
         ``reference`` and ``model`` (complex, shape (n_freq,), m/N).
@@ -354,6 +360,38 @@ def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
     return frac_v, csf_v
 
 
+def _measured_pair(model: NumericModel, params: Array, position: Mapping[str, float], measured: FRFData,
+                   f_max: float) -> tuple[Array, list[str], list[str], CArray, CArray]:
+    """Lines, output and input channels, and the measured and model FRFs (line-major) of a validation against
+    measured FRFs: the measured channels that are model sensor channels, lines in (0, f_max] (all lines when none
+    is below f_max), non-finite measured values set to zero in both."""
+    labels = set(model.sensor_matrix(params, position)[0])
+    outs = [k for k, n in enumerate(measured.output_names) if n in labels]
+    ins = [k for k, n in enumerate(measured.input_names) if n in labels]
+    if not outs or not ins:
+        msg = (f"measured FRFs at {dict(position)} have no {'output' if not outs else 'input'} at a sensor channel of "
+               f"model '{model.structure.name}' (outputs {list(measured.output_names)[:6]}, inputs "
+               f"{list(measured.input_names)}); map them with a sensor map")
+        raise DataError(msg)
+    freq = np.asarray(measured.freq, dtype=float)
+    lines = np.flatnonzero((freq > 0) & (freq <= f_max))
+    if lines.size == 0:
+        lines = np.flatnonzero(freq > 0)
+    if lines.size == 0:
+        msg = f"measured FRFs at {dict(position)} have no line above 0 Hz"
+        raise DataError(msg)
+    quantities = measured.output_quantities or ("displacement",) * len(measured.output_names)
+    orders = [DERIVATIVE_ORDER[quantities[k]] for k in outs]
+    out_names = [measured.output_names[k] for k in outs]
+    in_names = [measured.input_names[k] for k in ins]
+    h_ref = np.moveaxis(np.asarray(measured.H, dtype=complex)[np.ix_(outs, ins)][..., lines], -1, 0)
+    h_mod = model_frf(model, params, position, freq[lines], out_names, in_names, orders)[0]
+    bad = ~np.isfinite(h_ref)
+    h_ref = np.where(bad, 0.0, h_ref)
+    h_mod = np.where(bad, 0.0, h_mod)
+    return freq[lines], out_names, in_names, np.ascontiguousarray(h_ref), np.ascontiguousarray(h_mod)
+
+
 def _synthesis(shapes: ArrayLike, freq_modes: Array, zeta: Array, freq: Array, out_idx: Sequence[int],
                in_idx: Sequence[int]) -> CArray:
     """Modal sum ``sum_r psi_jr psi_kr / (w_r^2 - w^2 + 2 i zeta_r w_r w)``, line-major: (n_freq, n_out, n_in)."""
@@ -423,6 +461,7 @@ def validate_identification(
     n_freq: int = 600,
     exact: bool = True,
     overlay: tuple[str, str] | None = None,
+    measured: FRFData | None = None,
 ) -> ValidationResult:
     """FRAC, CSF, MACXP and NDD of a model against reference modes at one position (see the module notes).
 
@@ -448,6 +487,9 @@ def validate_identification(
         Compare the model's exact complex modes (default) rather than its first-order ones.
     overlay : (str, str), optional
         Output and input channel of the FRF kept for plots (default: the driving point with the largest peak).
+    measured : FRFData, optional
+        Measured FRFs at this position, at model sensor channels: without ``truth``, FRAC and CSF compare the
+        model's FRFs with them (``inputs``, ``freq`` and ``n_freq`` do not apply).
 
     Returns
     -------
@@ -487,42 +529,51 @@ def validate_identification(
     ndd_v[damped] = ndd(zeta_model[damped], data_set.damping[damped])
     n_show = min(poles.size, max(data_set.n_modes + 4, int(model_of.max()) + 1))
 
-    f_grid = (np.linspace(0.0, 1.25 * float(data_set.frequency.max()), n_freq + 1)[1:] if freq is None
-              else np.asarray(freq, dtype=float))
-    channels_in = list(inputs) if inputs is not None else sensors
-    unknown = [c for c in channels_in if c not in sensors]
-    if unknown:
-        msg = f"FRF input channels {unknown} are not reference sensor channels {sensors}"
-        raise DataError(msg)
-    in_idx = [sensors.index(c) for c in channels_in]
     notes: tuple[str, ...] = ()
-    if truth is not None:
-        t = nm.vector(truth if isinstance(truth, Mapping) else np.asarray(truth, dtype=float))
-        h_ref = _truth_receptance(nm, t.tobytes(), tuple(pos.items()), f_grid.tobytes(), tuple(sensors),
-                                  tuple(channels_in))
-        h_mod = _receptance_lines(nm, p, pos, f_grid, sensors, channels_in)
-        source = "truth"
+    out_names: list[str] = sensors
+    if truth is None and measured is not None:
+        f_grid, out_names, channels_in, h_ref, h_mod = _measured_pair(nm, p, pos, measured,
+                                                                      1.25 * float(data_set.frequency.max()))
+        source = "measured FRFs"
     else:
-        ref_shapes, notes = _scaled_reference(data_set, shapes[:, model_of])
-        h_ref = _synthesis(ref_shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)), in_idx)
-        h_mod = _synthesis(shapes[:, model_of], f_model, zeta_model, f_grid, range(len(sensors)), in_idx)
-        source = "modal synthesis"
+        f_grid = (np.linspace(0.0, 1.25 * float(data_set.frequency.max()), n_freq + 1)[1:] if freq is None
+                  else np.asarray(freq, dtype=float))
+        channels_in = list(inputs) if inputs is not None else sensors
+        unknown = [c for c in channels_in if c not in sensors]
+        if unknown:
+            msg = f"FRF input channels {unknown} are not reference sensor channels {sensors}"
+            raise DataError(msg)
+        in_idx = [sensors.index(c) for c in channels_in]
+        if truth is not None:
+            t = nm.vector(truth if isinstance(truth, Mapping) else np.asarray(truth, dtype=float))
+            h_ref = _truth_receptance(nm, t.tobytes(), tuple(pos.items()), f_grid.tobytes(), tuple(sensors),
+                                      tuple(channels_in))
+            h_mod = _receptance_lines(nm, p, pos, f_grid, sensors, channels_in)
+            source = "truth"
+        else:
+            ref_shapes, notes = _scaled_reference(data_set, shapes[:, model_of])
+            h_ref = _synthesis(ref_shapes, data_set.frequency, data_set.damping, f_grid, range(len(sensors)),
+                               in_idx)
+            h_mod = _synthesis(shapes[:, model_of], f_model, zeta_model, f_grid, range(len(sensors)), in_idx)
+            source = "modal synthesis"
     frac_v, csf_v = _line_criteria(h_mod, h_ref)
     if overlay is not None:
-        if overlay[0] not in sensors or overlay[1] not in channels_in:
+        if overlay[0] not in out_names or overlay[1] not in channels_in:
             msg = f"overlay {overlay} must name a reference channel and an FRF input channel {channels_in}"
             raise DataError(msg)
-        o_best, i_best = sensors.index(overlay[0]), channels_in.index(overlay[1])
+        o_best, i_best = out_names.index(overlay[0]), channels_in.index(overlay[1])
     else:
-        drive = [(sensors.index(c), j) for j, c in enumerate(channels_in)]
+        drive = [(out_names.index(c), j) for j, c in enumerate(channels_in) if c in out_names]
+        if not drive:  # measured FRFs without a driving point: every FRF is a candidate
+            drive = [(o, i) for o in range(len(out_names)) for i in range(len(channels_in))]
         peak = [float(np.max(np.abs(h_ref[:, o, i]))) for o, i in drive]
         o_best, i_best = drive[int(np.argmax(peak))]
-    kept = {"output": sensors[o_best], "input": channels_in[i_best], "reference": h_ref[:, o_best, i_best].copy(),
+    kept = {"output": out_names[o_best], "input": channels_in[i_best], "reference": h_ref[:, o_best, i_best].copy(),
             "model": h_mod[:, o_best, i_best].copy()}
     return ValidationResult(
         position=dict(pos), reference_frequency=data_set.frequency.copy(), model_mode=model_of,
         model_frequency=f_model, reference_damping=data_set.damping.copy(), model_damping=zeta_model, macxp=values,
         nfd=nfd_v, ndd=ndd_v, macxp_matrix=matrix[:n_show], freq=f_grid,
-        outputs=tuple(sensors), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
+        outputs=tuple(out_names), inputs=tuple(channels_in), frac=frac_v, csf=csf_v, frf_source=source,
         overlay=kept, notes=notes,
     )

@@ -386,7 +386,8 @@ def _overlay(result: Any, permuted: Sequence[Any]) -> str:
     for label, h, color, style in curves:
         ax_m.semilogy(result.freq, np.abs(h), color=color, ls=style, label=label)
         ax_p.plot(result.freq, np.degrees(np.angle(h)), color=color, ls=style)
-    ax_m.set_ylabel("receptance in m/N")
+    # measured FRFs keep their own quantity (accelerance of an accelerometer and hammer test, ...)
+    ax_m.set_ylabel("|FRF| as measured" if result.frf_source == "measured FRFs" else "receptance in m/N")
     ax_p.set_ylabel("phase in deg")
     ax_p.set_xlabel("frequency in Hz")
     ax_m.legend(fontsize=8)
