@@ -106,3 +106,12 @@ def test_ssi_cov_errors() -> None:
         ssi_cov(data, block_rows=60, orders=[2, 4])
     with pytest.raises(DataError, match="orders must be ascending"):
         ssi_cov(data, orders=[4, 2])
+
+
+def test_correlations_direct_and_fft_agree() -> None:
+    from cappe.identify._ssi import _correlations
+
+    y = np.random.default_rng(4).standard_normal((2, 3000))
+    direct = _correlations(y, y[:1], 40)
+    by_fft = _correlations(y, y[:1], 300)[:41]
+    np.testing.assert_allclose(direct, by_fft, atol=1e-12)  # two exact evaluations of the same sums

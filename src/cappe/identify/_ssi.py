@@ -17,7 +17,7 @@ output channels (complex, unscaled: without a measured force the modal mass and 
 
 Models of increasing order go into the stabilization diagram of :func:`cappe.identify.stabilization_diagram` (with
 the mode shapes as the vectors of its MAC test) and the physical modes are picked by :func:`select_poles`, as for
-LSCF. The correlations are estimated with the unbiased estimator through the FFT; a white-noise force's
+LSCF. The correlations are estimated with the unbiased estimator; a white-noise force's
 spectral colour does not matter as long as it excites every mode of the band (its own poles, of a coloured force,
 are outside the band or too damped to stabilize).
 """
@@ -99,8 +99,12 @@ class OperationalModes:
 
 
 def _correlations(y: FloatArray, ref: FloatArray, max_lag: int) -> FloatArray:
-    """Unbiased correlations ``R[k] = sum_t y[:, t+k] ref[:, t]^T / (N - k)``, k = 0 .. max_lag; (lags, l, r)."""
+    """Unbiased correlations ``R[k] = sum_t y[:, t+k] ref[:, t]^T / (N - k)``, k = 0 .. max_lag; (lags, l, r).
+
+    Direct products (a few matrix products per lag) for the short lags SSI needs; the FFT for long ones."""
     n = y.shape[1]
+    if max_lag <= 256:
+        return np.asarray([y[:, k:] @ ref[:, : n - k].T / (n - k) for k in range(max_lag + 1)], dtype=float)
     size = 1 << int(np.ceil(np.log2(2 * n)))
     fy = np.fft.rfft(y, size, axis=1)
     fr = np.fft.rfft(ref, size, axis=1)

@@ -8,13 +8,18 @@ and dashboard, and the bearing-preload studies behind it.
 - building blocks: :class:`FactorEstimator`, :func:`modal_features`, :func:`frf_features`, :class:`Baseline`,
   :class:`SequentialDetector` (CUSUM / EWMA designed by ARL), :func:`diagnose` with :class:`FaultHypothesis`;
 - history: :class:`HistoryStore` (SQLite or PostgreSQL), dashboard: :func:`make_server`;
-- data: :func:`simulate_scenario` (healthy drift, bearing loss, loosening screw, preload loss);
+- data: :func:`simulate_scenario` (healthy drift, bearing loss, loosening screw, preload loss), and
+  :func:`simulate_operation` (the same as output-only records in production: an unmeasured process force whose
+  spectrum changes with the load);
+- output-only monitoring (``excitation="operational"``): SSI-COV modes (:func:`cappe.identify.ssi_cov`) and
+  :class:`ModalFactorEstimator`;
 - preload studies: :func:`preload_map`, :func:`preload_frfs`, :func:`sensor_visibility`, and the quasi-static
   bearing stiffness test :func:`static_bearing_stiffness`.
 """
 
 from cappe.monitor._baseline import BASELINE_FORMAT, Baseline, learn_baseline
 from cappe.monitor._chain import (
+    OUTPUT_ONLY_LIMITATIONS,
     Alarm,
     Analysis,
     IngestResult,
@@ -28,6 +33,7 @@ from cappe.monitor._chain import (
 )
 from cappe.monitor._config import (
     CONFIG_FORMAT,
+    EXCITATIONS,
     SEVERITY_GRADES,
     Component,
     MonitorConfig,
@@ -47,14 +53,17 @@ from cappe.monitor._detection import (
     ewma_limit,
 )
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
-from cappe.monitor._estimation import FactorEstimate, FactorEstimator
+from cappe.monitor._estimation import FactorEstimate, FactorEstimator, ModalFactorEstimator
 from cappe.monitor._features import frf_features, modal_features
+from cappe.monitor._operation import OperationalMeasurement, operational_response, simulate_operation
 from cappe.monitor._preload import THESIS_PRELOADS, PreloadMap, preload_frfs, preload_map, sensor_visibility
 from cappe.monitor._scenario import (
     SCENARIO_FORMAT,
     SCENARIOS,
     ScenarioMeasurement,
+    ScenarioState,
     read_scenario,
+    scenario_states,
     simulate_scenario,
     write_scenario,
 )
@@ -73,6 +82,8 @@ __all__ = [
     "BASELINE_FORMAT",
     "SCHEMA_VERSION",
     "CONFIG_FORMAT",
+    "EXCITATIONS",
+    "OUTPUT_ONLY_LIMITATIONS",
     "SCENARIOS",
     "SCENARIO_FORMAT",
     "SEVERITY_GRADES",
@@ -92,11 +103,14 @@ __all__ = [
     "IngestTransaction",
     "IngestResult",
     "MeasurementRecord",
+    "ModalFactorEstimator",
     "Monitor",
     "MonitorConfig",
+    "OperationalMeasurement",
     "PreloadMap",
     "RecordedFiles",
     "ScenarioMeasurement",
+    "ScenarioState",
     "SequentialDetector",
     "SeverityThresholds",
     "StaticBearingTest",
@@ -117,12 +131,15 @@ __all__ = [
     "learn_store_baseline",
     "make_server",
     "modal_features",
+    "operational_response",
     "preload_frfs",
     "preload_map",
     "read_scenario",
+    "scenario_states",
     "register_machine",
     "sensor_visibility",
     "severity_rank",
+    "simulate_operation",
     "simulate_scenario",
     "static_bearing_stiffness",
     "worst_severity",
