@@ -549,7 +549,14 @@ def baseline(args: argparse.Namespace) -> int:
 
 
 def _status_of(store: Any, machine: str) -> dict[str, Any]:
-    from cappe.monitor import Baseline, MonitorConfig, detectable_change, worst_severity
+    from cappe.monitor import (
+        Baseline,
+        MonitorConfig,
+        detectable_change,
+        forecast_fault,
+        severity_rank,
+        worst_severity,
+    )
 
     latest = store.latest_measurement(machine)
     table = store.estimates(machine, path="fast")
@@ -564,6 +571,15 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
                    for r in rows.itertuples()}
     active = store.alarms(machine, unacknowledged=True)
     worst = worst_severity([a.severity for a in active])
+    forecasts: dict[str, Any] = {}
+    for fault in sorted({a.component for a in active}):
+        try:
+            forecast = forecast_fault(store, machine, fault)
+        except DataError:  # a config another program wrote: the status stands without it
+            forecast = None
+        if forecast is not None and severity_rank(worst_severity([a.severity for a in active
+                                                                   if a.component == fault])) < 3:
+            forecasts[fault] = {**forecast.to_dict(), "text": forecast.text()}
     doc = store.baseline(machine)
     detectable = None
     try:
@@ -579,6 +595,7 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
     return {"machine": machine, "measurements": store.counts(machine)["measurements"],
             "latest": None if latest is None else latest.to_dict(), "factors": factors,
             "baseline": doc is not None, "detectable": detectable, "limitations": limitations,
+            "forecasts": forecasts,
             "unacknowledged_alarms": [a.to_dict() for a in active], "worst_severity": worst}
 
 
@@ -602,6 +619,7 @@ def status(args: argparse.Namespace) -> int:
             lines.append(f"  detectable: a change of {sizes} is found after about {det['measurements']:.2g} "
                          f"measurement(s) ({det['shift']:g} standard deviations of the healthy scatter, resolution "
                          f"{100 * det['resolution']:.2g} %); smaller changes take longer")
+        lines += [f"  forecast {name}: {f['text']}" for name, f in d["forecasts"].items()]
         lines += [f"  note: {text}" for text in d["limitations"]]
         if d["latest"] and d["latest"].get("meta", {}).get("not_judged"):
             lines.append("  latest measurement NOT JUDGED: " + "; ".join(d["latest"]["meta"]["not_judged"]))

@@ -8,6 +8,7 @@ and dashboard, and the bearing-preload studies behind it.
 - building blocks: :class:`FactorEstimator`, :func:`modal_features`, :func:`frf_features`, :class:`Baseline`,
   :class:`SequentialDetector` (CUSUM / EWMA designed by ARL), :func:`diagnose` with :class:`FaultHypothesis`;
 - history: :class:`HistoryStore` (SQLite or PostgreSQL), dashboard: :func:`make_server`;
+- prognosis: :func:`forecast_crossing` (when a degrading component reaches a grade, Fieller interval);
 - data: :func:`simulate_scenario` (healthy drift, bearing loss, loosening screw, preload loss), and
   :func:`simulate_operation` (the same as output-only records in production: an unmeasured process force whose
   spectrum changes with the load);
@@ -27,6 +28,7 @@ from cappe.monitor._chain import (
     RecordedFiles,
     detectable_change,
     file_digest,
+    forecast_fault,
     ingest,
     learn_store_baseline,
     register_machine,
@@ -57,6 +59,7 @@ from cappe.monitor._estimation import FactorEstimate, FactorEstimator, ModalFact
 from cappe.monitor._features import frf_features, modal_features
 from cappe.monitor._operation import OperationalMeasurement, operational_response, simulate_operation
 from cappe.monitor._preload import THESIS_PRELOADS, PreloadMap, preload_frfs, preload_map, sensor_visibility
+from cappe.monitor._prognosis import CrossingForecast, forecast_crossing
 from cappe.monitor._scenario import (
     SCENARIO_FORMAT,
     SCENARIOS,
@@ -94,6 +97,7 @@ __all__ = [
     "Baseline",
     "ChartSignal",
     "Component",
+    "CrossingForecast",
     "DashboardServer",
     "Diagnosis",
     "FactorEstimate",
@@ -125,6 +129,8 @@ __all__ = [
     "ewma_arl",
     "ewma_limit",
     "file_digest",
+    "forecast_crossing",
+    "forecast_fault",
     "frf_features",
     "ingest",
     "learn_baseline",

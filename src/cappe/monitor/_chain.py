@@ -51,7 +51,7 @@ from cappe.systems.frf import FRFData
 from cappe.systems.timedata import TimeData
 
 __all__ = ["OUTPUT_ONLY_LIMITATIONS", "Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles",
-           "detectable_change", "file_digest",
+           "detectable_change", "file_digest", "forecast_fault",
            "ingest", "learn_store_baseline", "register_machine"]
 
 Array = NDArray[np.float64]
@@ -1022,3 +1022,48 @@ def _median_fit_sigma(records: Sequence[Any]) -> float | None:
     values = [float(r.meta["fit"]["sigma"]) for r in records if isinstance(r.meta.get("fit"), Mapping)
               and r.meta["fit"].get("sigma") is not None]
     return float(np.median(values)) if values else None
+
+
+def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95) -> Any:
+    """When an active component fault will reach its intolerable grade, from its trend since it was first alarmed.
+
+    The relative changes from healthy recorded for the component (the ``deviation`` estimates) from the
+    measurement of its first unacknowledged alarm on are extrapolated linearly (:func:`forecast_crossing`, a
+    Fieller interval); times are hours from the latest of them.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    machine : str
+        A registered machine.
+    fault : str
+        A component with an unacknowledged alarm.
+    level : float
+        Coverage probability of the interval.
+
+    Returns
+    -------
+    CrossingForecast or None
+        None where the fault is not a component, has no open alarm, or fewer than 3 judged measurements since.
+    """
+    from cappe.monitor._prognosis import forecast_crossing
+
+    config = MonitorConfig.from_dict(store.machine_config(machine))
+    if fault not in config.component_names:
+        return None
+    opened = [a for a in store.alarms(machine, unacknowledged=True) if a.component == fault]
+    if not opened:
+        return None
+    first = min(a.measurement_id for a in opened)
+    table = store.estimates(machine, path="deviation")
+    table = table[(table["parameter"] == fault) & (table["measurement_id"] >= first)]
+    if len(table) < 3:
+        return None
+    when = {r.id: r.timestamp for r in store.measurements(machine)}
+    stamps = [when[int(i)] for i in table["measurement_id"]]
+    latest = max(stamps)
+    hours = np.array([(s - latest).total_seconds() / 3600.0 for s in stamps])
+    change = table["value"].to_numpy(dtype=float)
+    limit = config.thresholds(fault).intolerable
+    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level)
