@@ -5,7 +5,8 @@ The hammer chain of README step 9 (1 % FRF noise, temperature drift, baseline fr
 a random time of day. At ``AT`` measurements after the first alarm, :func:`cappe.monitor.forecast_crossing`
 extrapolates the screw's changes since that alarm to the intolerable grade (-25 %); the truth is the time the
 simulated stiffness reaches 75 %. Reported: the coverage of the 95 % intervals (counting "cannot be told" as
-covering, and how often that was said), their median width and the median error of the point forecast.
+covering, and how often that was said), their median width and the median error of the point forecast, and the
+coverage of the intervals from the scatter alone (without the scale uncertainty ``SIZE_SCALE_STD``).
 
 ``python -m benchmarks.bench_prognosis [N_SEQUENCES]`` writes ``benchmarks/results/prognosis.json``.
 """
@@ -21,6 +22,7 @@ import numpy as np
 from benchmarks._common import write_results
 from cappe.model import NumericModel, load_model
 from cappe.monitor import Monitor, default_config, forecast_crossing, simulate_scenario
+from cappe.monitor._chain import SIZE_SCALE_STD
 
 OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
 START = datetime(2026, 1, 5, 6, 0, tzinfo=UTC)
@@ -39,6 +41,7 @@ def main() -> None:
                                       conditions=[m.conditions for m in day])
     n = 40  # measurements per sequence: 4 healthy, then the screw loosens by RATE per measurement
     covered, undetermined, widths, errors = [], 0, [], []
+    covered_scatter_only = []
     for seq in range(n_seq):
         start = START + timedelta(days=1, hours=float(np.random.default_rng(900 + seq).uniform(0, 24)))
         data = simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component="screw3",
@@ -60,9 +63,10 @@ def main() -> None:
                 break
         if first is None or len(times) < 3:
             continue
-        forecast = forecast_crossing(times, changes, -0.25)
+        forecast = forecast_crossing(times, changes, -0.25, scale_std=SIZE_SCALE_STD)
         truth = 0.25 * (4 + 0.25 / RATE)  # factor 1 - RATE (k - 4) reaches 0.75
         covered.append(forecast.covers(truth))
+        covered_scatter_only.append(forecast_crossing(times, changes, -0.25).covers(truth))
         undetermined += not forecast.determined
         if forecast.determined and forecast.time is not None:
             widths.append(forecast.upper - forecast.lower)
@@ -71,11 +75,13 @@ def main() -> None:
             print(f"sequence {seq}: forecast {forecast.text(now=times[-1])}; truth in {truth - times[-1]:.3g} h",
                   flush=True)
     rate = float(np.mean(covered))
-    row = {"sequences": len(covered), "coverage_95": rate,
+    row = {"sequences": len(covered), "coverage_95": rate, "scale_std": SIZE_SCALE_STD,
+           "coverage_95_scatter_only": float(np.mean(covered_scatter_only)),
            "coverage_binomial_se": float(np.sqrt(0.95 * 0.05 / len(covered))),
            "undetermined": undetermined, "median_width_h": float(np.median(widths)),
            "median_error_h": float(np.median(errors)), "rate_per_measurement": RATE, "forecast_after": AT}
-    print(f"coverage {100 * rate:.1f} % of {len(covered)} (95 % stated), {undetermined} undetermined, median width "
+    print(f"coverage {100 * rate:.1f} % of {len(covered)} (95 % stated; scatter only "
+          f"{100 * row['coverage_95_scatter_only']:.1f} %), {undetermined} undetermined, median width "
           f"{row['median_width_h']:.2f} h, median error {row['median_error_h']:+.2f} h")
     print(f"wrote {write_results('prognosis', [row])}")
 
