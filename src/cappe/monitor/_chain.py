@@ -5,7 +5,10 @@ diagnosis -> severity, and its bookkeeping in the history store.
 between measurements (the detector state travels through the store). Per measurement:
 
 1. **Pre-processing.** Time data become H1 FRFs of the configured channels (:func:`cappe.identify.estimate_frf`);
-   FRFs are used as they are.
+   FRFs are used as they are. A machine with ``excitation="operational"`` takes output-only time data instead:
+   SSI-COV modes (:func:`cappe.identify.ssi_cov`) paired with the model's, and in step 3 the factors are fitted
+   to their frequencies and unscaled shapes (:class:`ModalFactorEstimator`); its limits are
+   :data:`OUTPUT_ONLY_LIMITATIONS`.
 2. **Features.** Modal frequency and damping of every mode in the band (:func:`modal_features`), FRAC and CSF
    against the healthy mean FRF (:func:`frf_features`).
 3. **Parameters.** Fast path on every measurement: the component stiffness factors by the FRF fit of
