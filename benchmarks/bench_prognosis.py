@@ -71,8 +71,9 @@ def main() -> None:
         if forecast.determined and forecast.time is not None:
             widths.append(forecast.upper - forecast.lower)
             errors.append(forecast.time - truth)
-        if seq % 20 == 0:
-            print(f"sequence {seq}: forecast {forecast.text(now=times[-1])}; truth in {truth - times[-1]:.3g} h",
+        if seq % 10 == 0:
+            print(f"sequence {seq}: forecast {forecast.text(now=times[-1])}; truth in {truth - times[-1]:.3g} h; "
+                  f"coverage so far {sum(covered)}/{len(covered)} (scatter only {sum(covered_scatter_only)})",
                   flush=True)
     rate = float(np.mean(covered))
     row = {"sequences": len(covered), "coverage_95": rate, "scale_std": SIZE_SCALE_STD,
