@@ -58,6 +58,10 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("--severity", metavar="tolerable=F,intolerable=F",
                    help="relative-change thresholds of the grades (default tolerable=0.05,intolerable=0.25)")
     p.add_argument("--slow-every", type=int, default=0, help="run the full estimation every N measurements")
+    p.add_argument("--excitation", choices=("measured", "operational"), default="measured",
+                   help="measured: FRFs or time data with the force (default); operational: time data of the "
+                        "outputs only, recorded in production (output-only modal analysis; --inputs: where the "
+                        "process force acts)")
     p.add_argument("--replace", action="store_true", help="replace an existing machine's config")
     p.set_defaults(func=init)
 
@@ -72,10 +76,16 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
     p.add_argument("--fault-at", type=int, help="first faulty measurement (default count / 2)")
     p.add_argument("--component", help="faulty component (default front / screw2)")
     p.add_argument("--severity", type=float, help="fraction lost (default 0.1 / 0.5 / 0.4)")
-    p.add_argument("--noise", type=float, default=0.01, help="relative FRF noise (default 0.01)")
+    p.add_argument("--noise", type=float,
+                   help="relative FRF noise (default 0.01); with --operational the sensor noise (default 0.02)")
     p.add_argument("--interval", type=float, default=15.0, help="minutes between measurements (default 15)")
     p.add_argument("--start", help="ISO time of the first measurement (default 2026-01-05T06:00Z)")
     p.add_argument("--format", choices=("uff", "csv", "npz"), default="uff", help="file format (default uff)")
+    p.add_argument("--operational", action="store_true",
+                   help="output-only records in production instead of FRFs: responses to an unmeasured process "
+                        "force whose spectrum changes with the load (default for a machine with excitation "
+                        "'operational')")
+    p.add_argument("--seconds", type=float, default=30.0, help="record length of --operational (default 30 s)")
     p.add_argument("--seed", type=int, help="random seed")
     p.add_argument("-o", "--out", dest="directory", required=True, metavar="DIR", help="output directory")
     p.add_argument("--json", action="store_true", help="print machine-readable JSON")
@@ -199,7 +209,7 @@ def init(args: argparse.Namespace) -> int:
         components = [Component(k, k.replace("_", " "), tuple(names(v) or [])) for k, v in pairs.items()]
     severity = SeverityThresholds(**number_pairs(names(args.severity) or [], "--severity")) if args.severity else None
     settings: dict[str, Any] = {"detection": args.detection, "false_alarm_rate": args.false_alarm_rate,
-                                "shift": args.shift, "slow_every": args.slow_every}
+                                "shift": args.shift, "slow_every": args.slow_every, "excitation": args.excitation}
     if severity is not None:
         settings["severity"] = severity
     config = default_config(ctx.numeric, machine=args.machine, source=args.model, params=ctx.overrides,
@@ -215,8 +225,17 @@ def init(args: argparse.Namespace) -> int:
     lines += [f"  {c.name:10s} {c.label:20s} {', '.join(c.parameters)}" for c in config.components]
     if config.fault_parameters:
         lines.append(f"fault parameters: {', '.join(config.fault_parameters)}")
+    lines += [f"note: {text}" for text in _limitations(config)]
     emit(args, config.to_dict(), "\n".join(lines))
     return 0
+
+
+def _limitations(config: Any) -> list[str]:
+    """What the machine's measurements cannot tell (:meth:`cappe.monitor.Monitor.limitations`, without compiling
+    the model)."""
+    from cappe.monitor import OUTPUT_ONLY_LIMITATIONS
+
+    return [OUTPUT_ONLY_LIMITATIONS] if config.excitation == "operational" else []
 
 
 def simulate(args: argparse.Namespace) -> int:
@@ -236,8 +255,28 @@ def simulate(args: argparse.Namespace) -> int:
         msg = "give --store STORE --machine ID or --model MODEL"
         raise UsageError(msg)
     start = _when(args.start, "--start") if args.start else None
+    if args.operational or config.excitation == "operational":
+        from cappe.monitor import simulate_operation
+
+        noise = 0.02 if args.noise is None else args.noise
+        records = simulate_operation(config, args.scenario, n=args.count, fault_at=args.fault_at,
+                                     component=args.component, severity=args.severity, seconds=args.seconds,
+                                     noise=noise, interval=timedelta(minutes=args.interval), start=start,
+                                     model=model, rng=args.seed)
+        manifest = write_scenario(records, args.directory, machine=config.machine, scenario=args.scenario,
+                                  extension=args.format)
+        faulty = [m.index for m in records if m.fault]
+        first = records[0].data
+        text = (f"{config.machine}: {len(records)} operational records ({args.scenario}"
+                + (f", fault {records[faulty[0]].fault} from record {faulty[0]}" if faulty else "")
+                + f"), {first.duration:.3g} s at {first.fs:g} Hz x {len(config.outputs)} outputs, no force "
+                f"channel, {100 * noise:g} % sensor noise; wrote {manifest}")
+        emit(args, {"manifest": str(manifest), "count": len(records), "first_fault": faulty[0] if faulty else None},
+             text)
+        return 0
+    noise = 0.01 if args.noise is None else args.noise
     data = simulate_scenario(config, args.scenario, n=args.count, fault_at=args.fault_at, component=args.component,
-                             severity=args.severity, noise=args.noise, interval=timedelta(minutes=args.interval),
+                             severity=args.severity, noise=noise, interval=timedelta(minutes=args.interval),
                              start=start, model=model, rng=args.seed)
     manifest = write_scenario(data, args.directory, machine=config.machine, scenario=args.scenario,
                               extension=args.format)
@@ -245,7 +284,7 @@ def simulate(args: argparse.Namespace) -> int:
     text = (f"{config.machine}: {len(data)} measurements ({args.scenario}"
             + (f", fault {data[faulty[0]].fault} from measurement {faulty[0]}" if faulty else "")
             + f"), {data[0].frf.freq.size} lines x {len(config.outputs)} outputs x {len(config.inputs)} inputs, "
-            f"{100 * args.noise:g} % noise; wrote {manifest}")
+            f"{100 * noise:g} % noise; wrote {manifest}")
     emit(args, {"manifest": str(manifest), "count": len(data), "first_fault": faulty[0] if faulty else None}, text)
     return 0
 
@@ -510,7 +549,14 @@ def baseline(args: argparse.Namespace) -> int:
 
 
 def _status_of(store: Any, machine: str) -> dict[str, Any]:
-    from cappe.monitor import Baseline, MonitorConfig, detectable_change, worst_severity
+    from cappe.monitor import (
+        Baseline,
+        MonitorConfig,
+        detectable_change,
+        forecast_fault,
+        severity_rank,
+        worst_severity,
+    )
 
     latest = store.latest_measurement(machine)
     table = store.estimates(machine, path="fast")
@@ -525,8 +571,21 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
                    for r in rows.itertuples()}
     active = store.alarms(machine, unacknowledged=True)
     worst = worst_severity([a.severity for a in active])
+    forecasts: dict[str, Any] = {}
+    for fault in sorted({a.component for a in active}):
+        try:
+            forecast = forecast_fault(store, machine, fault)
+        except DataError:  # a config another program wrote: the status stands without it
+            forecast = None
+        if forecast is not None and severity_rank(worst_severity([a.severity for a in active
+                                                                   if a.component == fault])) < 3:
+            forecasts[fault] = {**forecast.to_dict(), "text": forecast.text()}
     doc = store.baseline(machine)
     detectable = None
+    try:
+        limitations = _limitations(MonitorConfig.from_dict(store.machine_config(machine)))
+    except DataError:
+        limitations = []
     if doc is not None:
         try:
             detectable = detectable_change(MonitorConfig.from_dict(store.machine_config(machine)),
@@ -535,7 +594,8 @@ def _status_of(store: Any, machine: str) -> dict[str, Any]:
             detectable = None
     return {"machine": machine, "measurements": store.counts(machine)["measurements"],
             "latest": None if latest is None else latest.to_dict(), "factors": factors,
-            "baseline": doc is not None, "detectable": detectable,
+            "baseline": doc is not None, "detectable": detectable, "limitations": limitations,
+            "forecasts": forecasts,
             "unacknowledged_alarms": [a.to_dict() for a in active], "worst_severity": worst}
 
 
@@ -559,6 +619,8 @@ def status(args: argparse.Namespace) -> int:
             lines.append(f"  detectable: a change of {sizes} is found after about {det['measurements']:.2g} "
                          f"measurement(s) ({det['shift']:g} standard deviations of the healthy scatter, resolution "
                          f"{100 * det['resolution']:.2g} %); smaller changes take longer")
+        lines += [f"  forecast {name}: {f['text']}" for name, f in d["forecasts"].items()]
+        lines += [f"  note: {text}" for text in d["limitations"]]
         if d["latest"] and d["latest"].get("meta", {}).get("not_judged"):
             lines.append("  latest measurement NOT JUDGED: " + "; ".join(d["latest"]["meta"]["not_judged"]))
     emit(args, {"machines": docs}, "\n".join(lines) if lines else f"{args.store}: no machines")

@@ -88,6 +88,7 @@ from cappe.identify._signals import (
     stepped_sine,
     stepped_sine_schedule,
 )
+from cappe.identify._ssi import OperationalModes, ssi_cov
 
 __all__ = [
     "residual_analysis",
@@ -97,6 +98,7 @@ __all__ = [
     "BLACK_BOX_STRUCTURES",
     "NINE_ACCELEROMETER_LABELS",
     "OE",
+    "OperationalModes",
     "ResidualAnalysis",
     "RunsTest",
     "RIGID_BODY_DOFS",
@@ -150,6 +152,7 @@ __all__ = [
     "sine",
     "solve_nine_accelerometers",
     "square",
+    "ssi_cov",
     "stabilization_diagram",
     "stepped_sine",
     "stepped_sine_frf",

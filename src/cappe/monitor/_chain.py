@@ -5,7 +5,10 @@ diagnosis -> severity, and its bookkeeping in the history store.
 between measurements (the detector state travels through the store). Per measurement:
 
 1. **Pre-processing.** Time data become H1 FRFs of the configured channels (:func:`cappe.identify.estimate_frf`);
-   FRFs are used as they are.
+   FRFs are used as they are. A machine with ``excitation="operational"`` takes output-only time data instead:
+   SSI-COV modes (:func:`cappe.identify.ssi_cov`) paired with the model's, and in step 3 the factors are fitted
+   to their frequencies and unscaled shapes (:class:`ModalFactorEstimator`); its limits are
+   :data:`OUTPUT_ONLY_LIMITATIONS`.
 2. **Features.** Modal frequency and damping of every mode in the band (:func:`modal_features`), FRAC and CSF
    against the healthy mean FRF (:func:`frf_features`).
 3. **Parameters.** Fast path on every measurement: the component stiffness factors by the FRF fit of
@@ -37,6 +40,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
 
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, load_model
@@ -44,12 +48,13 @@ from cappe.monitor._baseline import LEARNED_MARGIN, Baseline, learn_baseline
 from cappe.monitor._config import MonitorConfig, severity_rank, worst_severity
 from cappe.monitor._detection import ChartSignal, SequentialDetector
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
-from cappe.monitor._estimation import FactorEstimate, FactorEstimator
-from cappe.monitor._features import frf_features, modal_features
+from cappe.monitor._estimation import FactorEstimate, FactorEstimator, ModalFactorEstimator
+from cappe.monitor._features import PAIRING_TOLERANCE, frf_features, modal_features
 from cappe.systems.frf import FRFData
 from cappe.systems.timedata import TimeData
 
-__all__ = ["Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles", "detectable_change", "file_digest",
+__all__ = ["OUTPUT_ONLY_LIMITATIONS", "Alarm", "Analysis", "IngestResult", "Monitor", "RecordedFiles",
+           "detectable_change", "file_digest", "forecast_fault",
            "ingest", "learn_store_baseline", "register_machine"]
 
 Array = NDArray[np.float64]
@@ -59,6 +64,19 @@ MAP_MODES = (1, 2, 3)
 
 #: Standard uncertainties by which a change must pass a worse grade's threshold before the alarm escalates.
 ESCALATION_Z = 3.0
+
+#: Relative standard uncertainty of the scale of the chain's change sizes, for forecasts: the worst size error seen
+#: under model mismatch (2.4 % with the masses 3 % off, issue 25) taken as two standard deviations; the exact model
+#: shows 0.36 % (tests/monitor/test_prognosis.py).
+SIZE_SCALE_STD = 0.012
+
+#: What output-only records cannot tell, said wherever such a machine's results are shown.
+OUTPUT_ONLY_LIMITATIONS = (
+    "output-only (operational) records: the stiffness factors come from natural frequencies and unscaled mode "
+    "shapes (SSI-COV), relative to the model's masses; without a measured force the modal masses are unknown, so a "
+    "mass change cannot be told from a stiffness change (all stiffnesses rising together looks like all masses "
+    "falling); FRF levels, FRAC/CSF and damping are not monitored, and the slow path (every stiffness on its own) "
+    "does not run")
 
 #: Units of the operating conditions cappe knows (an offset in degC is one in K); others are shown without one.
 _CONDITION_UNITS = {"temperature": "K"}
@@ -207,6 +225,18 @@ class Monitor:
         inside = (modes.frequency >= config.band[0]) & (modes.frequency <= config.band[1])
         self.mode_numbers = tuple(int(k) + 1 for k in np.flatnonzero(inside))
         self._hypotheses: list[FaultHypothesis] | None = None
+        self.operational = config.excitation == "operational"
+        self.modal_estimator = ModalFactorEstimator(self.estimator) if self.operational else None
+
+    def limitations(self) -> list[str]:
+        """What this machine's measurements cannot tell (said in the text output of the CLI).
+
+        Returns
+        -------
+        list of str
+            One sentence each; empty for measured excitation.
+        """
+        return [OUTPUT_ONLY_LIMITATIONS] if self.operational else []
 
     def _estimator(self, groups: Mapping[str, Sequence[str]]) -> FactorEstimator:
         c = self.config
@@ -228,8 +258,18 @@ class Monitor:
         -------
         FRFData
         """
+        if self.operational:
+            msg = (f"machine '{self.config.machine}' is monitored output-only (excitation 'operational'): its "
+                   f"records are not turned into FRFs")
+            raise DataError(msg)
         if isinstance(data, FRFData):
             return data
+        missing = [c for c in self.config.inputs if c not in data.channels]
+        if missing:
+            msg = (f"time data lack the force channel(s) {missing} of machine '{self.config.machine}'; records of "
+                   f"operation without a measured force need a machine registered for them "
+                   f"(`cappe monitor init ... --excitation operational`)")
+            raise DataError(msg)
         from cappe.identify import estimate_frf
 
         _, hi = self.config.band
@@ -281,12 +321,14 @@ class Monitor:
         -------
         Analysis
         """
+        if start is None and baseline is not None:
+            start = baseline.coefficients[0]
+        if self.operational:
+            return self._analyse_operational(data, start)
         with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
             warnings.simplefilter("always")
             frf = self.prepare(data)
         notes = [f"pre-processing: {w.message}" for w in caught]
-        if start is None and baseline is not None:
-            start = baseline.coefficients[0]
         # before a baseline exists the measurements are the healthy reference: no misfit check; afterwards a
         # fit is judged against the healthy fits' residual, which includes the model's error for this machine
         check = {"misfit_ratio": None} if baseline is None else {"misfit_level": baseline.sigma}
@@ -310,6 +352,79 @@ class Monitor:
                 notes.append(f"FRF features: {exc}")
         slow_estimate = self.slow_path(frf, estimate) if slow else None
         return Analysis(estimate, freq, damp, frac_value, csf_value, slow_estimate, tuple(notes))
+
+    def operational_modes(self, data: FRFData | TimeData) -> tuple[Array, Array, NDArray[np.complex128], list[str]]:
+        """Output-only modes of a record (SSI-COV), paired with the monitored modes of the model.
+
+        Parameters
+        ----------
+        data : TimeData
+            Responses at the configured outputs, recorded in operation.
+
+        Returns
+        -------
+        frequency, damping : ndarray, shape (m,)
+            Of each monitored mode (NaN: not found).
+        shapes : ndarray of complex, shape (n_out, m)
+            At the outputs, unit norm (NaN: not found).
+        notes : list of str
+            Why modes are missing.
+
+        Raises
+        ------
+        DataError
+            The data are FRFs or lack an output channel.
+        """
+        from cappe.identify import ssi_cov
+
+        if not isinstance(data, TimeData):
+            msg = (f"machine '{self.config.machine}' is monitored output-only: its records are time data of the "
+                   f"outputs {list(self.config.outputs)}, not FRFs")
+            raise DataError(msg)
+        missing = [c for c in self.config.outputs if c not in data.channels]
+        if missing:
+            msg = (f"time data lack the output channel(s) {missing} of machine '{self.config.machine}'; channels: "
+                   f"{list(data.channels)}")
+            raise DataError(msg)
+        target = self.expected_modes(np.zeros(len(self.estimator.names)))
+        n_out = len(self.config.outputs)
+        freq = np.full(target.size, np.nan)
+        zeta = np.full(target.size, np.nan)
+        shapes = np.full((n_out, target.size), np.nan, dtype=complex)
+        top = 4 * ((2 * target.size + 8 + 3) // 4)  # twice the modes in the band and room for noise poles
+        block_rows = max(int(np.ceil(data.fs / max(self.config.band[0], 1.0))), top // n_out + 1)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            try:
+                found = ssi_cov(data, outputs=list(self.config.outputs), band=self.config.band,
+                                orders=range(4, top + 1, 4), block_rows=block_rows)
+            except DataError as exc:
+                return freq, zeta, shapes, [f"output-only modal analysis failed: {exc}"]
+        notes = [f"output-only modal analysis: {w.message}" for w in caught]
+        if found.n_modes and target.size:
+            cost = np.abs(np.log(found.frequency[:, None] / target[None, :]))
+            rows, cols = linear_sum_assignment(cost)
+            for r, c in zip(rows, cols, strict=True):
+                if cost[r, c] <= PAIRING_TOLERANCE:
+                    freq[c], zeta[c], shapes[:, c] = found.frequency[r], found.damping[r], found.shapes[:, r]
+        missing_modes = [k for k, f in zip(self.mode_numbers, freq, strict=True) if not np.isfinite(f)]
+        if missing_modes:
+            notes.append(f"modes {missing_modes} not found in the record")
+        return freq, zeta, shapes, notes
+
+    def _analyse_operational(self, data: FRFData | TimeData, start: ArrayLike | None) -> Analysis:
+        """Steps 1-3 on an output-only record: SSI-COV modes, then the factors from frequencies and shapes."""
+        assert self.modal_estimator is not None
+        freq, zeta, shapes, notes = self.operational_modes(data)
+        ok = np.isfinite(freq)
+        if not np.any(ok):
+            msg = f"no monitored mode found in the record: {'; '.join(notes)}"
+            raise DataError(msg)
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            estimate = self.modal_estimator.estimate(freq[ok], zeta[ok], shapes[:, ok], start)
+        notes += [f"fast path: {w.message}" for w in caught]
+        return Analysis(estimate, freq, zeta, None, None, None, tuple(notes))
 
     def slow_path(self, frf: FRFData, fast: FactorEstimate) -> FactorEstimate:
         """The full estimation: every stiffness parameter of every component on its own, from the fast path.
@@ -663,13 +778,18 @@ def ingest(
     mon = _monitor_for(store, machine, monitor)
     baseline_doc = store.baseline(machine)
     baseline = Baseline.from_dict(baseline_doc) if baseline_doc else None
-    with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
-        warnings.simplefilter("always")
-        frf = mon.prepare(data)
-    analysis = mon.analyse(frf, baseline=baseline)
-    analysis = replace(analysis, notes=(*(f"pre-processing: {w.message}" for w in caught), *analysis.notes))
+    frf: FRFData | None = None
+    if mon.operational:
+        analysis = mon.analyse(data, baseline=baseline)
+        kind = "operational"
+    else:
+        with warnings.catch_warnings(record=True) as caught:  # low coherence etc.: kept with the record
+            warnings.simplefilter("always")
+            frf = mon.prepare(data)
+        analysis = mon.analyse(frf, baseline=baseline)
+        analysis = replace(analysis, notes=(*(f"pre-processing: {w.message}" for w in caught), *analysis.notes))
+        kind = "frf" if isinstance(data, FRFData) else "time"
     names = analysis.estimate.names
-    kind = "frf" if isinstance(data, FRFData) else "time"
     deviation = None
     alarms: list[Alarm] = []
     fit_meta = {"success": analysis.estimate.success, "sigma": analysis.estimate.sigma,
@@ -687,7 +807,7 @@ def ingest(
     with store.transaction(machine) as tx:
         state = tx.state()
         mid = tx.add_measurement(timestamp=timestamp, source=source, kind=kind, conditions=finite,
-                                 frf=mon._band(frf) if keep_frf else None, meta=meta)
+                                 frf=mon._band(frf) if keep_frf and frf is not None else None, meta=meta)
         tx.add_features(mid, analysis.features())
         tx.add_estimates(mid, path="fast", values=dict(zip(names, analysis.estimate.factor.tolist(), strict=True)),
                          std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
@@ -702,7 +822,7 @@ def ingest(
             tx.set_state(state)
         count = int((state or {}).get("count", 0))
     every = mon.config.slow_every
-    if alarms or (every and baseline is not None and not not_judged and count % every == 0):
+    if frf is not None and (alarms or (every and baseline is not None and not not_judged and count % every == 0)):
         slow = mon.slow_path(frf, analysis.estimate)
         with store.transaction(machine) as tx:
             tx.add_estimates(mid, path="slow", values=dict(zip(slow.names, slow.factor.tolist(), strict=True)),
@@ -910,3 +1030,50 @@ def _median_fit_sigma(records: Sequence[Any]) -> float | None:
     values = [float(r.meta["fit"]["sigma"]) for r in records if isinstance(r.meta.get("fit"), Mapping)
               and r.meta["fit"].get("sigma") is not None]
     return float(np.median(values)) if values else None
+
+
+def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95) -> Any:
+    """When an active component fault will reach its intolerable grade, from its trend since it was first alarmed.
+
+    The relative changes from healthy recorded for the component (the ``deviation`` estimates) from the
+    measurement of its first unacknowledged alarm on are extrapolated linearly (:func:`forecast_crossing`, a
+    Fieller interval widened for a systematic scale error of :data:`SIZE_SCALE_STD`); times are hours from the
+    latest of them.
+
+    Parameters
+    ----------
+    store : HistoryStore
+        The history store.
+    machine : str
+        A registered machine.
+    fault : str
+        A component with an unacknowledged alarm.
+    level : float
+        Coverage probability of the interval.
+
+    Returns
+    -------
+    CrossingForecast or None
+        None where the fault is not a component, has no open alarm, or fewer than 3 judged measurements since.
+    """
+    from cappe.monitor._prognosis import forecast_crossing
+
+    config = MonitorConfig.from_dict(store.machine_config(machine))
+    if fault not in config.component_names:
+        return None
+    opened = [a for a in store.alarms(machine, unacknowledged=True) if a.component == fault]
+    if not opened:
+        return None
+    first = min(a.measurement_id for a in opened)
+    table = store.estimates(machine, path="deviation")
+    table = table[(table["parameter"] == fault) & (table["measurement_id"] >= first)]
+    if len(table) < 3:
+        return None
+    when = {r.id: r.timestamp for r in store.measurements(machine)}
+    stamps = [when[int(i)] for i in table["measurement_id"]]
+    latest = max(stamps)
+    hours = np.array([(s - latest).total_seconds() / 3600.0 for s in stamps])
+    change = table["value"].to_numpy(dtype=float)
+    limit = config.thresholds(fault).intolerable
+    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level,
+                             scale_std=SIZE_SCALE_STD)

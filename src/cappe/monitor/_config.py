@@ -24,10 +24,13 @@ import numpy as np
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CONFIG_FORMAT", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds",
+__all__ = ["CONFIG_FORMAT", "EXCITATIONS", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds",
            "default_components", "default_config", "severity_rank", "worst_severity"]
 
 CONFIG_FORMAT = "cappe.monitor-config/1"
+
+#: How a machine's measurements are excited: a measured force (FRFs), or the unmeasured process (output-only).
+EXCITATIONS = ("measured", "operational")
 
 #: The thesis's three grades (1.1, block 6), from harmless to stop-the-machine.
 SEVERITY_GRADES = ("tolerable", "conditionally tolerable", "intolerable")
@@ -188,6 +191,10 @@ class MonitorConfig:
     slow_every : int
         Run the slow path (all component parameters freed one by one) every this many measurements; 0: only
         with an alarm.
+    excitation : {"measured", "operational"}
+        ``"measured"``: measurements are FRFs, or time data with the force channels (a hammer or shaker test).
+        ``"operational"``: time data of the outputs only, recorded in operation under the unmeasured process
+        force (output-only modal analysis, SSI-COV; the inputs are then where that force acts).
     """
 
     machine: str
@@ -208,10 +215,15 @@ class MonitorConfig:
     noise_floor: float = 0.01
     max_order: int = 24
     slow_every: int = 0
+    excitation: str = "measured"
 
     def __post_init__(self) -> None:
         if not self.machine:
             msg = "monitor config: machine id must not be empty"
+            raise DataError(msg)
+        if self.excitation not in EXCITATIONS:
+            msg = (f"monitor config '{self.machine}': excitation must be one of {list(EXCITATIONS)}; got "
+                   f"{self.excitation!r}")
             raise DataError(msg)
         if self.detection not in ("cusum", "ewma"):
             msg = f"monitor config '{self.machine}': detection must be 'cusum' or 'ewma'; got {self.detection!r}"
@@ -342,6 +354,7 @@ class MonitorConfig:
             "noise_floor": self.noise_floor,
             "max_order": self.max_order,
             "slow_every": self.slow_every,
+            "excitation": self.excitation,
         }
 
     @classmethod
@@ -383,6 +396,7 @@ class MonitorConfig:
                 noise_floor=float(data.get("noise_floor", 0.01)),
                 max_order=int(data.get("max_order", 24)),
                 slow_every=int(data.get("slow_every", 0)),
+                excitation=str(data.get("excitation", "measured")),
             )
         except (KeyError, TypeError, IndexError, ValueError) as exc:
             if isinstance(exc, DataError):

@@ -525,3 +525,169 @@ class FactorEstimator:
         a = np.concatenate([flat[:-1].real, flat[:-1].imag], axis=1).T
         b = np.concatenate([flat[-1].real, flat[-1].imag]) * float(p[k[0]] != 0)
         return np.asarray(np.linalg.lstsq(a, b, rcond=None)[0], dtype=float)
+
+
+class ModalFactorEstimator:
+    """Fit group stiffness factors to output-only modes: natural frequencies and unscaled mode shapes.
+
+    Without a measured force the FRFs are unknown; what operational responses give (:func:`cappe.identify.ssi_cov`)
+    are the poles and the mode shapes at the output channels up to a complex scale each. The residuals are those of
+    :class:`cappe.estimate.ExactModalProblem` on the model's exact complex modes (one home of modal residuals and
+    their analytic Jacobian): the relative frequency error over ``freq_noise`` and the shape residual
+    ``a (a^H x) / (a^H a) - x`` (squared norm ``1 - MAC``, blind to the shape's scale) over ``shape_noise``;
+    damping ratios are not fitted (operational damping estimates scatter by 10 % and depend on the load).
+    Shapes at velocity and acceleration outputs are brought to displacement level by dividing by the identified
+    pole (``s`` per derivative), so channels of mixed quantities compare with the model's displacement shapes.
+    The Jacobian in the group log-factors is the chain rule ``dr/ds_g = sum_(i in g) p_i dr/dp_i``.
+
+    What the data cannot give: the modal masses (no force, no scale), hence no mass change and no change of all
+    stiffnesses together against all masses; the factors are relative to the model's masses.
+
+    Parameters
+    ----------
+    factors : FactorEstimator
+        The machine's FRF factor estimator: its groups, reference parameters, position and outputs.
+    freq_noise : float
+        Relative scatter of an identified natural frequency (weights the frequency residuals).
+    shape_noise : float
+        Scatter of a shape component relative to the shape's largest (weights the shape residuals).
+
+    Raises
+    ------
+    DataError
+        An output has no sensor channel of the model (the shapes are compared at sensor channels).
+    """
+
+    def __init__(self, factors: FactorEstimator, *, freq_noise: float = 1e-3, shape_noise: float = 1e-2) -> None:
+        from cappe.estimate._space import ParameterSpace
+
+        self.factors = factors
+        self.names = factors.names
+        self.freq_noise = float(freq_noise)
+        self.shape_noise = float(shape_noise)
+        model = factors.model
+        labels, rows = model.sensor_matrix(factors.reference, factors.position)
+        _, s_mat = model.io_matrices(factors.reference, factors.position)
+        self.sensors: list[str] = []
+        for o in factors.outputs:
+            row = s_mat[model.output_names.index(o)]
+            hits = [lab for lab, r in zip(labels, rows, strict=True) if np.allclose(r, row, rtol=1e-9, atol=1e-12)]
+            if not hits:
+                msg = (f"output '{o}' is not a sensor channel of model '{model.structure.name}' (its row matches none "
+                       f"of {labels}); output-only monitoring compares mode shapes at sensor channels")
+                raise DataError(msg)
+            self.sensors.append(hits[0])
+        self._order = np.array([DERIVATIVE_ORDER[model.output_quantities[model.output_names.index(o)]]
+                                for o in factors.outputs])
+        self._unknowns = [model.parameter_names[i] for members in factors._members for i in members]
+        self._columns = np.concatenate(factors._members)
+        self._group_of = np.concatenate([np.full(m.size, g) for g, m in enumerate(factors._members)])
+        values = dict(zip(model.parameter_names, factors.reference.tolist(), strict=True))
+        self._space = ParameterSpace.from_model(model, self._unknowns, values=values, log=False)
+
+    def reference_modes(self, frequency: ArrayLike, damping: ArrayLike, shapes: ArrayLike) -> Any:
+        """Identified modes as the :class:`~cappe.systems.modal.ModalData` the fit compares with.
+
+        Parameters
+        ----------
+        frequency, damping : array_like, shape (m,)
+            Natural frequencies (Hz) and damping ratios.
+        shapes : array_like of complex, shape (n_out, m)
+            Shapes at the estimator's outputs, in each output's quantity.
+
+        Returns
+        -------
+        ModalData
+            Displacement-level shapes at the outputs' sensor channels.
+        """
+        from cappe.systems.modal import ModalData, ModalDataSet
+
+        f = np.asarray(frequency, dtype=float)
+        z = np.asarray(damping, dtype=float)
+        wn = 2 * np.pi * f
+        pole = -z * wn + 1j * wn * np.sqrt(np.clip(1 - z**2, 0.0, None))
+        x = np.asarray(shapes, dtype=complex) / pole[None, :] ** self._order[:, None]
+        data_set = ModalDataSet(dict(self.factors.position), f, z, x)
+        return ModalData(tuple(self.sensors), (data_set,), self.factors.model.structure.name)
+
+    def estimate(
+        self,
+        frequency: ArrayLike,
+        damping: ArrayLike,
+        shapes: ArrayLike,
+        start: ArrayLike | None = None,
+        *,
+        max_iter: int = 30,
+    ) -> FactorEstimate:
+        """Trust-region least squares of the log-factors against identified modes (from ``start``, default 0).
+
+        Parameters
+        ----------
+        frequency, damping : array_like, shape (m,)
+            Natural frequencies (Hz) and damping ratios of the identified modes.
+        shapes : array_like of complex, shape (n_out, m)
+            Their shapes at the outputs (any scale).
+        start : array_like, shape (n,), optional
+            Start log-factors.
+        max_iter : int
+            Largest number of Jacobian evaluations.
+
+        Returns
+        -------
+        FactorEstimate
+            Covariance scaled by the residual variance; ``success=False`` (with a warning) where the Jacobian
+            is rank deficient (fewer modes than the groups need) or the fit did not converge.
+
+        Raises
+        ------
+        DataError
+            No mode given, or ``start`` of the wrong size.
+        """
+        from scipy.optimize import least_squares
+
+        from cappe.estimate._exact_modal import ExactModalProblem
+
+        n = len(self.names)
+        f = np.asarray(frequency, dtype=float)
+        if f.size == 0:
+            msg = "no identified mode to fit the stiffness factors to"
+            raise DataError(msg)
+        s0 = np.zeros(n) if start is None else np.asarray(start, dtype=float).copy()
+        if s0.shape != (n,) or not np.all(np.isfinite(s0)):
+            msg = f"start must be {n} finite log-factors ({list(self.names)}); got {s0.tolist()}"
+            raise DataError(msg)
+        problem = ExactModalProblem(self.factors.model, self._space, self.reference_modes(f, damping, shapes),
+                                    (1.0, 0.0, 1.0), noise=(self.freq_noise, 0.0, self.shape_noise),
+                                    pairing="mac")
+
+        def unknowns(s_vec: Array) -> Array:
+            return self.factors.parameters(s_vec)[self._columns]
+
+        def fun(s_vec: Array) -> Array:
+            return problem.residuals(unknowns(s_vec))
+
+        def jac(s_vec: Array) -> Array:
+            p = unknowns(s_vec)
+            j_p = problem.jacobian(p) * p[None, :]
+            out = np.zeros((j_p.shape[0], n))
+            np.add.at(out.T, self._group_of, j_p.T)
+            return out
+
+        with np.errstate(all="ignore"):
+            result = least_squares(fun, s0, jac=jac, method="trf", max_nfev=max_iter, x_scale=1.0,
+                                   xtol=1e-10, ftol=1e-10)
+        r = np.asarray(result.fun, dtype=float)
+        j = np.asarray(result.jac, dtype=float)
+        dof = max(r.size - n, 1)
+        sigma2 = float(r @ r) / dof
+        jtj = j.T @ j
+        rank = int(np.linalg.matrix_rank(jtj))
+        success = bool(result.success) and rank == n
+        message = str(result.message)
+        if rank < n:
+            message = (f"{message}; Jacobian rank {rank} < {n} groups ({f.size} modes do not determine every "
+                       f"component)")
+        if not success:
+            warnings.warn(f"modal stiffness-factor fit: {message}", ConvergenceWarning, stacklevel=2)
+        return FactorEstimate(self.names, np.asarray(result.x, dtype=float), sigma2 * np.linalg.pinv(jtj),
+                              0.5 * float(r @ r), float(np.sqrt(sigma2)), int(result.nfev), success, message)

@@ -20,24 +20,28 @@ which keeps responses that vanish by symmetry from being noise-free).
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Iterator, Sequence
 from dataclasses import dataclass
 from datetime import UTC, datetime, timedelta
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from cappe._rng import RandomLike, as_generator
 from cappe.exceptions import DataError
-from cappe.io import write_frf, write_json
+from cappe.io import write_frf, write_json, write_time_data
 from cappe.io.files import finite_number, read_json, shown
 from cappe.model import NumericModel, load_model
 from cappe.monitor._config import MonitorConfig
 from cappe.systems.frf import FRFData
 
-__all__ = ["SCENARIOS", "SCENARIO_FORMAT", "ScenarioMeasurement", "read_scenario", "simulate_scenario",
-           "write_scenario"]
+if TYPE_CHECKING:
+    from cappe.monitor._operation import OperationalMeasurement
+
+__all__ = ["SCENARIOS", "SCENARIO_FORMAT", "ScenarioMeasurement", "ScenarioState", "read_scenario",
+           "scenario_states", "simulate_scenario", "write_scenario"]
 
 SCENARIO_FORMAT = "cappe.monitor-scenario/1"
 
@@ -134,14 +138,96 @@ def simulate_scenario(
     >>> [(m.fault, m.truth.get("front")) for m in data]
     [(None, 1.0), (None, 1.0), ('front', 0.9), ('front', 0.9)]
     """
-    if scenario not in SCENARIOS:
-        msg = f"unknown scenario {scenario!r}; choose one of {sorted(SCENARIOS)}"
-        raise DataError(msg)
     if n < 1 or not (0 <= noise < 1) or df <= 0:
         msg = f"scenario needs n >= 1, 0 <= noise < 1 and df > 0; got n={n}, noise={noise}, df={df}"
         raise DataError(msg)
     nm = model if model is not None else NumericModel(load_model(config.model))
     gen = as_generator(rng)
+    freq = np.arange(df, 1.2 * config.band[1] + df / 2, df)
+    out = []
+    for state in scenario_states(config, scenario, nm, gen, n=n, fault_at=fault_at, component=component,
+                                 severity=severity, interval=interval, start=start, temperature=temperature,
+                                 preload_per_kelvin=preload_per_kelvin):
+        frf = nm.system(state.params, config.position).frf(freq, inputs=list(config.inputs),
+                                                           outputs=list(config.outputs))
+        out.append(ScenarioMeasurement(state.index, state.timestamp, state.conditions, state.truth, state.fault,
+                                       _noisy(frf, noise, gen)))
+    return out
+
+
+@dataclass(frozen=True)
+class ScenarioState:
+    """The machine at one measurement of a scenario: when, its conditions, its true parameters.
+
+    Attributes
+    ----------
+    index : int
+    timestamp : datetime
+    conditions : dict
+        ``temperature`` in degC, rounded as a sensor would report it.
+    truth : dict
+        The true relative value of every changed quantity.
+    fault : str or None
+        The fault present, None while healthy.
+    params : ndarray
+        The model's full parameter vector (SI).
+    """
+
+    index: int
+    timestamp: datetime
+    conditions: dict[str, float]
+    truth: dict[str, float]
+    fault: str | None
+    params: NDArray[np.float64]
+
+
+def scenario_states(
+    config: MonitorConfig,
+    scenario: str,
+    model: NumericModel,
+    rng: np.random.Generator,
+    *,
+    n: int,
+    fault_at: int | None = None,
+    component: str | None = None,
+    severity: float | None = None,
+    interval: timedelta = timedelta(minutes=15),
+    start: datetime | None = None,
+    temperature: tuple[float, float] = (22.0, 4.0),
+    preload_per_kelvin: float = 0.01,
+) -> Iterator[ScenarioState]:
+    """The machine's state at each of ``n`` measurements: thermal drift and the scenario's fault (module notes).
+
+    One standard normal draw of ``rng`` per measurement (the wandering temperature), taken when the state is
+    produced, so a caller may draw its noise in between.
+
+    Parameters
+    ----------
+    config : MonitorConfig
+        The machine.
+    scenario : {"healthy", "bearing-loss", "loosening-screw", "preload-loss"}
+    model : NumericModel
+        Compiled ``config.model``.
+    rng : Generator
+    n : int
+        Number of measurements.
+    fault_at, component, severity, interval, start, temperature, preload_per_kelvin
+        As :func:`simulate_scenario`.
+
+    Yields
+    ------
+    ScenarioState
+
+    Raises
+    ------
+    DataError
+        An unknown scenario or component, or a severity outside (0, 1).
+    """
+    if scenario not in SCENARIOS:
+        msg = f"unknown scenario {scenario!r}; choose one of {sorted(SCENARIOS)}"
+        raise DataError(msg)
+    nm = model
+    gen = rng
     default_component, default_severity = SCENARIOS[scenario]
     target = component or default_component
     loss = default_severity if severity is None else float(severity)
@@ -160,10 +246,8 @@ def simulate_scenario(
     base = nm.vector(dict(config.params))
     has_preload = "preload" in nm.parameter_names
     k_preload = nm.parameter_names.index("preload") if has_preload else -1
-    freq = np.arange(df, 1.2 * config.band[1] + df / 2, df)
     t0 = start if start is not None else datetime(2026, 1, 5, 6, 0, tzinfo=UTC)
     wander = 0.0
-    out = []
     for k in range(n):
         when = t0 + k * interval
         hours = (when - t0).total_seconds() / 3600.0
@@ -190,10 +274,7 @@ def simulate_scenario(
             truth[target] = factor
         if has_preload:
             truth["preload"] = float(p[k_preload] / base[k_preload])
-        frf = nm.system(p, config.position).frf(freq, inputs=list(config.inputs), outputs=list(config.outputs))
-        out.append(ScenarioMeasurement(k, when, {"temperature": round(float(temp), 3)}, truth,
-                                       target if faulty else None, _noisy(frf, noise, gen)))
-    return out
+        yield ScenarioState(k, when, {"temperature": round(float(temp), 3)}, truth, target if faulty else None, p)
 
 
 def _noisy(frf: FRFData, noise: float, gen: np.random.Generator) -> FRFData:
@@ -207,19 +288,19 @@ def _noisy(frf: FRFData, noise: float, gen: np.random.Generator) -> FRFData:
 
 
 def write_scenario(
-    measurements: Sequence[ScenarioMeasurement],
+    measurements: Sequence[ScenarioMeasurement | OperationalMeasurement],
     directory: str | Path,
     *,
     machine: str,
     scenario: str,
     extension: str = "uff",
 ) -> Path:
-    """Write one FRF file per measurement and a manifest ``scenario.json`` (the ingest order, times,
-    conditions and truth); return the manifest's path.
+    """Write one FRF file (time data for operational records) per measurement and a manifest ``scenario.json``
+    (the ingest order, times, conditions and truth); return the manifest's path.
 
     Parameters
     ----------
-    measurements : sequence of ScenarioMeasurement
+    measurements : sequence of ScenarioMeasurement or OperationalMeasurement
         The simulated measurements, in ingest order.
     directory : str or Path
         Folder to write into (created if needed).
@@ -248,7 +329,10 @@ def write_scenario(
     entries = []
     for m in measurements:
         name = f"m{m.index:05d}.{extension}"
-        write_frf(folder / name, m.frf)
+        if isinstance(m, ScenarioMeasurement):
+            write_frf(folder / name, m.frf)
+        else:  # an operational record: time data of the outputs
+            write_time_data(folder / name, m.data)
         entries.append({"file": name, "timestamp": m.timestamp.isoformat(), "conditions": m.conditions,
                         "truth": m.truth, "fault": m.fault})
     doc = {"format": SCENARIO_FORMAT, "machine": machine, "scenario": scenario, "measurements": entries}

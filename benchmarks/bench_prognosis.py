@@ -1,0 +1,91 @@
+"""Prognosis on the spindle: does the forecast of a loosening screw's intolerable crossing cover the truth?
+
+The hammer chain of README step 9 (1 % FRF noise, temperature drift, baseline from one healthy day) watches
+``N_SEQUENCES`` sequences in which housing screw 3 loosens linearly by ``RATE`` per measurement (every 15 min) from
+a random time of day. At ``AT`` measurements after the first alarm, :func:`cappe.monitor.forecast_crossing`
+extrapolates the screw's changes since that alarm to the intolerable grade (-25 %); the truth is the time the
+simulated stiffness reaches 75 %. Reported: the coverage of the 95 % intervals (counting "cannot be told" as
+covering, and how often that was said), their median width and the median error of the point forecast, and the
+coverage of the intervals from the scatter alone (without the scale uncertainty ``SIZE_SCALE_STD``).
+
+``python -m benchmarks.bench_prognosis [N_SEQUENCES]`` writes ``benchmarks/results/prognosis.json``.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+from datetime import UTC, datetime, timedelta
+
+import numpy as np
+
+from benchmarks._common import write_results
+from cappe.model import NumericModel, load_model
+from cappe.monitor import Monitor, default_config, forecast_crossing, simulate_scenario
+from cappe.monitor._chain import SIZE_SCALE_STD
+
+OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
+START = datetime(2026, 1, 5, 6, 0, tzinfo=UTC)
+RATE = 0.01  # stiffness lost per measurement (4 %/h)
+AT = 8  # measurements after the first alarm at which the forecast is made
+
+
+def main() -> None:
+    n_seq = int(sys.argv[1]) if len(sys.argv) > 1 else 200
+    model = NumericModel(load_model("builtin:spindle-bearing"))
+    config = default_config(model, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
+                            band=(150.0, 1000.0))
+    monitor = Monitor(config, model)
+    day = simulate_scenario(config, "healthy", n=96, model=model, rng=1, start=START)
+    baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
+                                      conditions=[m.conditions for m in day])
+    n = 40  # measurements per sequence: 4 healthy, then the screw loosens by RATE per measurement
+    covered, undetermined, widths, errors = [], 0, [], []
+    covered_scatter_only = []
+    for seq in range(n_seq):
+        start = START + timedelta(days=1, hours=float(np.random.default_rng(900 + seq).uniform(0, 24)))
+        data = simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component="screw3",
+                                 severity=RATE * (n - 1 - 4), model=model, rng=1000 + seq, start=start)
+        state = None
+        first = None
+        times, changes = [], []
+        for k, m in enumerate(data):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                analysis = monitor.analyse(m.frf, baseline=baseline, modal=False)
+            state, deviation, alarms = monitor.step(state, analysis, m.conditions, baseline)
+            if first is None and any(a.component == "screw3" for a in alarms):
+                first = k
+            if first is not None:
+                times.append(0.25 * k)
+                changes.append(float(np.expm1(deviation[monitor.estimator.names.index("screw3")])))
+            if first is not None and k == first + AT - 1:
+                break
+        if first is None or len(times) < 3:
+            continue
+        forecast = forecast_crossing(times, changes, -0.25, scale_std=SIZE_SCALE_STD)
+        truth = 0.25 * (4 + 0.25 / RATE)  # factor 1 - RATE (k - 4) reaches 0.75
+        covered.append(forecast.covers(truth))
+        covered_scatter_only.append(forecast_crossing(times, changes, -0.25).covers(truth))
+        undetermined += not forecast.determined
+        if forecast.determined and forecast.time is not None:
+            widths.append(forecast.upper - forecast.lower)
+            errors.append(forecast.time - truth)
+        if seq % 10 == 0:
+            print(f"sequence {seq}: forecast {forecast.text(now=times[-1])}; truth in {truth - times[-1]:.3g} h; "
+                  f"coverage so far {sum(covered)}/{len(covered)} (scatter only {sum(covered_scatter_only)})",
+                  flush=True)
+    rate = float(np.mean(covered))
+    row = {"sequences": len(covered), "coverage_95": rate, "scale_std": SIZE_SCALE_STD,
+           "coverage_95_scatter_only": float(np.mean(covered_scatter_only)),
+           "coverage_binomial_se": float(np.sqrt(0.95 * 0.05 / len(covered))),
+           "undetermined": undetermined, "median_width_h": float(np.median(widths)),
+           "median_error_h": float(np.median(errors)), "rate_per_measurement": RATE, "forecast_after": AT}
+    print(f"coverage {100 * rate:.1f} % of {len(covered)} (95 % stated; scatter only "
+          f"{100 * row['coverage_95_scatter_only']:.1f} %), {undetermined} undetermined, median width "
+          f"{row['median_width_h']:.2f} h, median error {row['median_error_h']:+.2f} h")
+    print(f"wrote {write_results('prognosis', [row])}")
+
+
+if __name__ == "__main__":
+    main()
