@@ -111,7 +111,7 @@ def test_chi_square_p_values_are_uniform_on_a_right_model(two_mass):
 def test_chi_square_fails_on_a_wrong_structure_and_widens_the_intervals(two_mass, cls):
     """The rig has a damper between the masses (c12 = 8 N s/m) that the model is told is absent (c12 = 0 known):
     G21's s term, a structural zero of the model, is identified well away from 0. The test fails, the text says
-    so, and the covariance is scaled by chi2 / dof."""
+    so (FAILED), and the covariance is scaled by chi2 / dof."""
     data = _lsim_record(3, truth={**TRUTH, "c12": 8.0})
     est = _fit(two_mass, cls, data)
     test = est.diagnostics["second_step_test"]
@@ -119,6 +119,9 @@ def test_chi_square_fails_on_a_wrong_structure_and_widens_the_intervals(two_mass
     assert test["p_value"] < 1e-6
     assert test["covariance_scale"] == pytest.approx(test["chi2"] / test["dof"])
     assert any(w.startswith("second step FAILED its chi-square test") for w in est.diagnostics["warnings"])
+    assert not est.success
+    assert est.diagnostics["fit_test"] == "failed"
+    assert est.message.startswith("step 2 does not reproduce step 1 within its uncertainty")
     right = _fit(two_mass, cls, _lsim_record(3))
     assert right.diagnostics["second_step_test"]["passed"]
     assert np.all(est.std > 2 * right.std)
@@ -151,7 +154,8 @@ def test_cli_text_reports_the_chi_square_test(tmp_path, capsys):
     code = main(["estimate", "builtin:two-mass-rig", "--data", str(path), "--method", "two-step-tf",
                  "--intersample", "foh", "--set", "c12=0", "--unknowns", ",".join(UNKNOWNS), "--seed", "0"])
     out = capsys.readouterr().out
-    assert code in (0, 1)
+    assert code == 1
+    assert out.startswith("two-step-tf: FAILED (the fit does not explain the data) - step 2 does not reproduce")
     assert "second step weighted by: covariance of step 1 (minimum distance)" in out
     assert "second step against step 1's uncertainty: chi2" in out
     assert "FAILED; standard errors scaled by" in out
