@@ -813,7 +813,7 @@ class PolynomialModel(Settings, ABC):
         --------
         >>> data = TimeData.from_rate(100.0, {"u": np.sin(np.arange(200.0)), "y": np.cos(np.arange(200.0))})
         >>> arx = ARX(1, 1).fit(data, inputs="u", output="y")
-        >>> arx.with_parameters(arx.parameters_ * 2).A_[1] == 2 * arx.A_[1]
+        >>> bool(arx.with_parameters(arx.parameters_ * 2).A_[1] == 2 * arx.A_[1])
         True
         """
         self._check_fitted()
