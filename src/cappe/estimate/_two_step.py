@@ -811,7 +811,9 @@ def _second_step_test(fitted: Fitted, n_compared: int, n_unknowns: int) -> Fitte
         f"structure or a biased step 1 (intersample, delay); standard errors scaled by sqrt(chi2/dof) = "
         f"{np.sqrt(factor):.3g}, but a bias is not covered by scaling")]
     message = "step 2 does not reproduce step 1 within its uncertainty (chi-square test)"
-    if estimate.message:
+    if estimate.diagnostics.get("fit_test") == "failed":  # step 1's own failure is the cause: it comes first
+        message = f"{estimate.message}; {message}"
+    elif estimate.message:
         message = f"{message}; {estimate.message}"
     failed = replace(estimate, success=False, message=message, diagnostics=diagnostics)
     return fitted.with_estimate(with_noise_variance(failed, fitted.cost, factor))
@@ -860,7 +862,8 @@ class TwoStepTFEstimator(_TwoStep):
     band : (float, float), optional
         Frequency band (Hz) of the rational fit for FRF data.
     weights : mapping "input->output" -> float, optional
-        Factor on that pair's residuals (default 1).
+        Factor on that pair's residuals in the unweighted comparison (default 1); given, they select it under
+        ``weighting="auto"``.
     n_starts : int
         Start points: the start and ``n_starts - 1`` Sobol points inside the bounds.
     intersample : {"zoh", "foh", "bl"}
