@@ -499,7 +499,8 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
             for p in pairs:
                 if p.output == output:
                     tfs[p.label] = oe.to_transfer_function(p.input, negative_real="reflect", intersample=hold)
-            propagated[output] = _propagate(oe, [p.input for p in pairs if p.output == output], hold, n)
+            propagated[output] = _propagate(oe, [p.input for p in pairs if p.output == output], hold, n,
+                                            strictly_proper=nk == 1)
         else:
             na = int(est.arx_order)
             arx = ARX(na, [na] * len(inputs), [nk] * len(inputs)).fit(data, inputs=inputs, output=output)
@@ -549,14 +550,17 @@ def _continuous_coefficients(ss: StateSpaceModel) -> tuple[Array, Array]:
     return num / den[-1], den / den[-1]
 
 
-def _propagate(oe: Any, inputs: Sequence[str], hold: str, degree: int) -> tuple[Array, Array] | str:
+def _propagate(oe: Any, inputs: Sequence[str], hold: str, degree: int, *, strictly_proper: bool = False) -> tuple[
+        Array, Array] | str:
     """The continuous coefficients of an OE model's transfer functions from ``inputs`` (per input: numerator
     ``degree + 1``, then the denominator below its leading 1) and their covariance, ``G cov(theta) G^T``: the
     first-order (delta-method) propagation of the OE parameter covariance through the inverse hold map
     (:meth:`PolynomialModel.to_state_space`). ``G`` is the central difference of the map with steps of 1e-3 of each
     parameter's standard error: a linearization over the scale the covariance describes (its truncation error is
-    ~1e-6 of the propagated standard errors; 1e-2 and 1e-4 steps agree to that). Returns why not where the
-    covariance is not finite."""
+    ~1e-6 of the propagated standard errors; 1e-2 and 1e-4 steps agree to that). With a delay of one sample
+    (``strictly_proper``: a held input reaching a displacement or velocity) the continuous equivalent has no
+    ``s^degree`` numerator term: that coefficient is round-off and is set to exactly 0 with no variance (it is then
+    not compared). Returns why not where the covariance is not finite."""
     theta = np.asarray(oe.parameters_, dtype=float)
     cov = np.asarray(oe.covariance_, dtype=float)
     std = np.sqrt(np.diag(cov))
@@ -572,6 +576,8 @@ def _propagate(oe: Any, inputs: Sequence[str], hold: str, degree: int) -> tuple[
             if num.size != degree + 1:
                 msg = f"internal error: a continuous equivalent of order {num.size - 1}, expected {degree}"
                 raise RuntimeError(msg)
+            if strictly_proper:
+                num[degree] = 0.0
             parts += [num, den[:degree]]
         return np.concatenate(parts)
 
