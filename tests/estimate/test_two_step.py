@@ -199,9 +199,17 @@ def test_one_percent_noise_both_variants_within_five_percent(rig):
         assert est.estimate_.identifiable.all()
         assert np.all(np.isfinite(est.estimate_.std))
         assert est.estimate_.diagnostics["starts"] == 16
-    # structural zeros of G12 / G21 (c12 = 0 known): the identified s, s^2, s^3 terms are noise and not compared
-    assert tf.estimate_.diagnostics["ignored_numerator_powers"]["F1->d2"] == [1, 2, 3]
-    assert tf.estimate_.diagnostics["compared"]["F1->d1"]["numerator_powers"] == [0, 1, 2]
+    # time data: step 1's covariance weights step 2 (minimum distance); every identified coefficient is compared,
+    # those of the structural zeros of G12 / G21 (c12 = 0 known: s .. s^4) against 0
+    assert tf.estimate_.diagnostics["second_step_weighting"].startswith("covariance of step 1")
+    assert tf.estimate_.diagnostics["compared"]["F1->d2"]["structural_zeros"] == [1, 2, 3, 4]
+    assert tf.estimate_.diagnostics["compared"]["F1->d1"]["structural_zeros"] == [3, 4]
+    # transfer functions given without a covariance: the normalized-square index, whose structural zeros are noise
+    # and not compared
+    assert zp.estimate_.diagnostics["second_step_weighting"].startswith("none (normalized-square index)")
+    plain = TwoStepTFEstimator(rig, rng=4, weighting="none").fit(data).estimate_
+    assert plain.diagnostics["ignored_numerator_powers"]["F1->d2"] == [1, 2, 3]
+    assert plain.diagnostics["compared"]["F1->d1"]["numerator_powers"] == [0, 1, 2]
 
 
 # -- identifiability ------------------------------------------------------------------------------------------------

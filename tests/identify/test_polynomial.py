@@ -525,3 +525,21 @@ def test_clipped_output_warns_by_name():
     data = TimeData.from_rate(100.0, {"u": u, "y": np.clip(y, -limit, limit)})
     with pytest.warns(DataWarning, match=r"look clipped .*'y'"):
         ARX(2, 2).fit(data, inputs=["u"], output="y")
+
+
+def test_with_parameters_copies_the_model_with_other_polynomials():
+    """The copy used to propagate the OE covariance (two-step weighting): same orders, new polynomials, original
+    unchanged; a vector of the wrong length or with NaN is refused."""
+    t = np.arange(400.0)
+    data = TimeData.from_rate(100.0, {"u": np.sin(0.3 * t), "y": np.cos(0.2 * t)})
+    oe = OE(nb=2, nf=1).fit(data, inputs="u", output="y")
+    theta = oe.parameters_ + np.array([0.1, -0.2, 0.05])
+    other = oe.with_parameters(theta)
+    np.testing.assert_array_equal(other.parameters_, theta)
+    np.testing.assert_array_equal(other.F_[0][1:], theta[2:])  # names: b1[u], b2[u], f1[u]
+    np.testing.assert_array_equal(other.B_[0][1:], theta[:2])
+    assert not np.array_equal(oe.parameters_, theta)
+    with pytest.raises(DataError, match=r"with_parameters: need 3 finite parameters .*; got shape \(2,\)"):
+        oe.with_parameters(theta[:2])
+    with pytest.raises(DataError, match="with_parameters: need 3 finite parameters"):
+        oe.with_parameters([np.nan, 0.0, 0.0])

@@ -256,5 +256,15 @@ def _text(result: Any, method: str) -> str:
             f"{'yes' if analysis.get('independent') else 'NO'}; white "
             + ", ".join(f"{o} {'yes' if ok else 'NO'}" for o, ok in white.items())
         )
+    weighting = diagnostics.get("second_step_weighting")
+    if isinstance(weighting, str):
+        lines.append(f"second step weighted by: {weighting}")
+    second = diagnostics.get("second_step_test")
+    if isinstance(second, dict) and second.get("p_value") is not None:
+        verdict = "passed" if second["passed"] else "FAILED"
+        lines.append(f"second step against step 1's uncertainty: chi2 {second['chi2']:.4g} on {second['dof']} dof, "
+                     f"p = {second['p_value']:.3g} (level {second['level']:g}): {verdict}"
+                     + ("" if second["passed"] else
+                        f"; standard errors scaled by {np.sqrt(second['covariance_scale']):.3g}"))
     lines += [f"WARNING: {line}" for line in diagnostics.get("warnings", [])]
     return "\n".join(lines)

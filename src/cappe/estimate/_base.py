@@ -26,7 +26,7 @@ from cappe.exceptions import ConvergenceWarning, ModelError, NotFittedError
 from cappe.model import NumericModel, Structure
 
 __all__ = ["CostFunction", "Estimator", "Fitted", "fit_least_squares", "honest_intervals",
-           "least_squares_fit", "with_residual_tests"]
+           "least_squares_fit", "with_noise_variance", "with_residual_tests"]
 
 #: Relative standard error above which an unknown is practically non-identifiable (its 95 % interval spans more
 #: than about +-60 % of its value).
@@ -496,6 +496,44 @@ def honest_intervals(space: ParameterSpace, unc: LocalUncertainty, at_bound: Seq
             practical[name] = f"relative std {100 * rel[k]:.3g} % > {100 * PRACTICAL_RELATIVE_STD:g} %"
     flags = np.array([bool(f) and n not in practical for n, f in zip(space.names, unc.identifiable, strict=True)])
     return replace(unc, ci95=np.column_stack([lo, hi]), identifiable=flags), practical
+
+
+def with_noise_variance(estimate: ParameterEstimate, cost: CostFunction, noise_variance: float) -> ParameterEstimate:
+    """The estimate with its Gauss-Newton uncertainty recomputed for another residual variance.
+
+    ``cov = noise_variance (J^T J)^-1`` from the Jacobian the search last evaluated at the optimum, then
+    :func:`honest_intervals` (intervals in the search's coordinates, practical identifiability) as
+    :func:`least_squares_fit` does it.
+
+    Parameters
+    ----------
+    estimate : ParameterEstimate
+        The estimate of a least-squares fit (values at ``cost.centre``).
+    cost : CostFunction
+        Its cost, with the Jacobian at the optimum.
+    noise_variance : float
+        Variance of the residuals (residual units squared).
+
+    Returns
+    -------
+    ParameterEstimate
+        Same values and cost; new std, intervals, correlation, identifiability and practical-identifiability notes.
+    """
+    if cost.jacobian is None:  # pragma: no cover - least_squares_fit always keeps the Jacobian
+        msg = "internal error: no Jacobian at the optimum"
+        raise RuntimeError(msg)
+    space = cost.space
+    r = np.asarray(cost.residuals(cost.centre), dtype=float)
+    unc = jacobian_uncertainty(names=space.names, values=cost.centre, jacobian=cost.jacobian, residuals=r,
+                               noise_variance=noise_variance)
+    unc, practical = honest_intervals(space, unc, list(estimate.diagnostics.get("at_bound", [])))
+    diagnostics = {k: v for k, v in estimate.diagnostics.items()
+                   if k not in ("practically_non_identifiable", "weakest_direction")}
+    if practical:
+        diagnostics["practically_non_identifiable"] = practical
+        diagnostics["weakest_direction"] = _weakest_direction(space, unc)
+    return replace(estimate, std=unc.std, ci95=unc.ci95, correlation=unc.correlation, identifiable=unc.identifiable,
+                   combinations=unc.combinations, diagnostics=diagnostics)
 
 
 def _weakest_direction(space: ParameterSpace, unc: LocalUncertainty) -> dict[str, Any]:

@@ -19,6 +19,7 @@ Steiglitz-McBride iterations (OE, BJ). Filters start from zero initial condition
 
 from __future__ import annotations
 
+import copy
 import inspect
 import math
 import warnings
@@ -786,6 +787,46 @@ class PolynomialModel(Settings, ABC):
         self.success_ = success
         self.message_ = message
         self.n_iter_ = n_iter
+
+    def with_parameters(self, parameters: Sequence[float] | Array) -> Self:
+        """A copy of the fitted model with another parameter vector: the same orders, inputs, output and ``dt_``.
+
+        For propagating the parameter covariance through a map of the polynomials (continuous coefficients, poles):
+        the fit statistics (``covariance_``, ``loss_`` ...) stay those of the original fit.
+
+        Parameters
+        ----------
+        parameters : array_like, shape (n_parameters_,)
+            In the order of ``parameter_names_``.
+
+        Returns
+        -------
+        PolynomialModel
+            A new object; ``self`` is unchanged.
+
+        Raises
+        ------
+        DataError
+            The vector has the wrong length or non-finite entries.
+
+        Examples
+        --------
+        >>> data = TimeData.from_rate(100.0, {"u": np.sin(np.arange(200.0)), "y": np.cos(np.arange(200.0))})
+        >>> arx = ARX(1, 1).fit(data, inputs="u", output="y")
+        >>> bool(arx.with_parameters(arx.parameters_ * 2).A_[1] == 2 * arx.A_[1])
+        True
+        """
+        self._check_fitted()
+        theta = np.asarray(parameters, dtype=float)
+        if theta.shape != self.parameters_.shape or not np.all(np.isfinite(theta)):
+            msg = (f"{self!r}.with_parameters: need {self.parameters_.size} finite parameters "
+                   f"{list(self.parameter_names_)}; got shape {theta.shape}")
+            raise DataError(msg)
+        out = copy.copy(self)
+        p = _unpack(theta, self._o)
+        out.A_, out.B_, out.C_, out.D_, out.F_ = p.A, list(p.B), p.C, p.D, list(p.F)
+        out.parameters_ = theta.copy()
+        return out
 
     # -- use ------------------------------------------------------------------------------------------------------
     def _check_fitted(self) -> None:

@@ -1,0 +1,162 @@
+"""The two-step methods' second step weighted by step 1's covariance (minimum distance) and its chi-square test
+(issue 21, "a two-step method worth using").
+
+References: records of the two-mass rig written from its equations of motion with scipy.signal.lsim (linear
+interpolation of the force between samples; tests/estimate/test_intersample.py), not with cappe's simulator; a
+Monte Carlo of step 1's parameters for the propagated covariance; the chi-square distribution for the test's
+p-values.
+"""
+
+from __future__ import annotations
+
+import warnings
+
+import numpy as np
+import pytest
+from scipy import stats
+from test_intersample import FS, TRUTH, UNKNOWNS, _force, _lsim, _record  # the rig written from physics
+
+from cappe.cli import main
+from cappe.estimate._two_step import TwoStepTFEstimator, TwoStepZPKEstimator, _continuous_coefficients, _propagate
+from cappe.exceptions import DataError
+from cappe.identify import OE
+from cappe.io import write_time_data
+from cappe.model import NumericModel
+
+#: the issue's limits: masses and stiffnesses within 5 %, dampers within 15 %
+LIMIT = {"m1": 0.05, "m2": 0.05, "k11": 0.05, "k12": 0.05, "k22": 0.05, "c11": 0.15, "c22": 0.15}
+
+
+def _lsim_record(seed, truth=TRUTH, n=6000, noise=0.01):
+    """The issue's repro: F1 only, d1 and d2 with 1 % noise, from scipy's lsim (a linear force between samples)."""
+    rng = np.random.default_rng(seed)
+    f = _force(n, FS, 700.0, rng)
+    return _record(f, _lsim(truth, f), noise, rng)
+
+
+def _fit(two_mass, cls, data, **settings):
+    settings = {"intersample": "foh", **settings}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # convergence and residual-test warnings are asserted on the result
+        return cls(NumericModel(two_mass), UNKNOWNS, values={"c12": 0.0}, rng=0, **settings).fit(data).estimate_
+
+
+def _errors(est):
+    return {n: v / TRUTH[n] - 1 for n, v in est.parameters.items()}
+
+
+@pytest.mark.slow  # three two-step fits of 6000 samples: ~20 s on a loaded machine
+@pytest.mark.parametrize("cls", [TwoStepTFEstimator, TwoStepZPKEstimator])
+def test_weighting_by_step_one_recovers_what_the_plain_index_misses(two_mass, cls):
+    """A record of the repro where the normalized-square index puts m2, k12, k22 and c22 far off (measured: TF
+    beyond 30 %, ZP 28.5 %) along the direction that only k12^2 / (m1 m2) determines; weighted by step 1's
+    covariance every parameter is within 1 % and every 95 % interval covers the truth. Fails on the unweighted
+    code (no ``weighting``; its default is the plain index)."""
+    data = _lsim_record(1)
+    plain = _fit(two_mass, cls, data, weighting="none")
+    assert max(abs(e) for e in _errors(plain).values()) > 0.2  # the issue's 5 % limit missed by far
+    est = _fit(two_mass, cls, data)
+    assert est.diagnostics["second_step_weighting"] == "covariance of step 1 (minimum distance)"
+    for name, err in _errors(est).items():
+        assert abs(err) < LIMIT[name], (name, err)
+        assert abs(err) < 0.01, (name, err)  # one-step's errors on these records: up to 0.3 %
+    lo, hi = est.ci95.T
+    truth = np.array([TRUTH[n] for n in est.names])
+    assert np.all((lo <= truth) & (truth <= hi)), dict(zip(est.names, zip(lo, hi, strict=True), strict=True))
+    assert est.identifiable.all()
+    test = est.diagnostics["second_step_test"]
+    # 2 outputs x (5 numerator + 4 denominator coefficients) = 18 compared, 7 unknowns
+    assert test["dof"] == 11
+    assert test["passed"]
+
+
+def test_propagated_covariance_matches_a_monte_carlo_of_step_one():
+    """The first-order propagation of the OE covariance to the continuous coefficients against 300 draws of the OE
+    parameters from their Gaussian: the standard errors of the compared coefficients agree within 15 % (the
+    Monte Carlo's own scatter at 300 draws is ~4 %)."""
+    rng = np.random.default_rng(7)
+    data = _lsim_record(7, n=3000)
+    oe = OE(nb=[5], nf=[4], nk=[0]).fit(data, inputs=["F1"], output="d1")
+    centre, cov = _propagate(oe, ["F1"], "foh", 4)
+    draws = rng.multivariate_normal(oe.parameters_, oe.covariance_, size=300)
+
+    def coefficients(theta):
+        num, den = _continuous_coefficients(oe.with_parameters(theta).to_state_space("F1", intersample="foh"))
+        return np.concatenate([num, den[:4]])
+
+    np.testing.assert_allclose(coefficients(oe.parameters_), centre, rtol=1e-12)
+    mc = np.array([coefficients(t) for t in draws])
+    mc_std = mc.std(axis=0, ddof=1)
+    std = np.sqrt(np.diag(cov))
+    # numerator s^0..s^2 (s^3, s^4 are structural zeros of d1/F1 estimated about 0) and the four denominator terms
+    compared = [0, 1, 2, 5, 6, 7, 8]
+    np.testing.assert_allclose(std[compared], mc_std[compared], rtol=0.15)
+
+
+@pytest.mark.slow  # 24 two-step fits of 3000 samples: ~40 s
+def test_chi_square_p_values_are_uniform_on_a_right_model(two_mass):
+    """24 records of the right model (lsim, FOH inverse): the p-values of the second step's test spread over
+    [0, 1] (Kolmogorov-Smirnov against the uniform, loose level 1 %); at most 2 of 24 fail at the 1 % level."""
+    p_values = []
+    for seed in range(24):
+        est = _fit(two_mass, TwoStepTFEstimator, _lsim_record(100 + seed, n=3000), n_starts=2)
+        p_values.append(est.diagnostics["second_step_test"]["p_value"])
+    p_values = np.array(p_values)
+    assert stats.kstest(p_values, "uniform").pvalue > 0.01, np.sort(p_values)
+    assert np.sum(p_values < 0.01) <= 2, np.sort(p_values)
+
+
+@pytest.mark.slow  # two two-step fits of 6000 samples
+@pytest.mark.parametrize("cls", [TwoStepTFEstimator, TwoStepZPKEstimator])
+def test_chi_square_fails_on_a_wrong_structure_and_widens_the_intervals(two_mass, cls):
+    """The rig has a damper between the masses (c12 = 8 N s/m) that the model is told is absent (c12 = 0 known):
+    G21's s term, a structural zero of the model, is identified well away from 0. The test fails, the text says
+    so (FAILED), and the covariance is scaled by chi2 / dof."""
+    data = _lsim_record(3, truth={**TRUTH, "c12": 8.0})
+    est = _fit(two_mass, cls, data)
+    test = est.diagnostics["second_step_test"]
+    assert not test["passed"]
+    assert test["p_value"] < 1e-6
+    assert test["covariance_scale"] == pytest.approx(test["chi2"] / test["dof"])
+    assert any(w.startswith("second step FAILED its chi-square test") for w in est.diagnostics["warnings"])
+    assert not est.success
+    assert est.diagnostics["fit_test"] == "failed"
+    assert est.message.startswith("step 2 does not reproduce step 1 within its uncertainty")
+    right = _fit(two_mass, cls, _lsim_record(3))
+    assert right.diagnostics["second_step_test"]["passed"]
+    assert np.all(est.std > 2 * right.std)
+
+
+def test_weighting_setting_is_checked_and_needs_a_covariance(two_mass):
+    data = _lsim_record(2, n=1500)
+    with pytest.raises(DataError, match="weighting must be 'auto', 'covariance' or 'none'; got 'markov'"):
+        _fit(two_mass, TwoStepTFEstimator, data, weighting="markov")
+    with pytest.raises(DataError, match="with weighting 'covariance' step 1's covariance sets every weight"):
+        _fit(two_mass, TwoStepTFEstimator, data, weighting="covariance", weights={"F1->d1": 2.0})
+    with pytest.raises(DataError, match="weighting 'covariance' needs the covariance of step 1; the pruned ARX"):
+        _fit(two_mass, TwoStepTFEstimator, data, weighting="covariance", identification="arx", intersample="zoh")
+    # per-pair weights keep the normalized-square index (auto)
+    est = _fit(two_mass, TwoStepTFEstimator, data, weights={"F1->d1": 2.0}, n_starts=2)
+    assert est.diagnostics["second_step_weighting"] == "none (normalized-square index)"
+    assert "second_step_test" not in est.diagnostics
+
+
+def test_noise_free_step_one_is_not_weighted_by_round_off(two_mass):
+    est = _fit(two_mass, TwoStepTFEstimator, _lsim_record(4, n=2000, noise=0.0), n_starts=2)
+    assert "fits ['d1', 'd2'] exactly" in est.diagnostics["second_step_weighting"]
+    assert max(abs(e) for e in _errors(est).values()) < 1e-8
+
+
+@pytest.mark.slow  # one CLI fit of 6000 samples
+def test_cli_text_reports_the_chi_square_test(tmp_path, capsys):
+    path = tmp_path / "rig.npz"
+    write_time_data(path, _lsim_record(3, truth={**TRUTH, "c12": 8.0}))
+    code = main(["estimate", "builtin:two-mass-rig", "--data", str(path), "--method", "two-step-tf",
+                 "--intersample", "foh", "--set", "c12=0", "--unknowns", ",".join(UNKNOWNS), "--seed", "0"])
+    out = capsys.readouterr().out
+    assert code == 1
+    assert out.startswith("two-step-tf: FAILED (the fit does not explain the data) - step 2 does not reproduce")
+    assert "second step weighted by: covariance of step 1 (minimum distance)" in out
+    assert "second step against step 1's uncertainty: chi2" in out
+    assert "FAILED; standard errors scaled by" in out
+    assert "WARNING: second step FAILED its chi-square test" in out
