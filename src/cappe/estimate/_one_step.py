@@ -68,7 +68,7 @@ from cappe.model.numeric import ParamsLike
 from cappe.systems.dynamic_stiffness import frf_lines
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
-from cappe.systems.statespace import band_limited_response, check_intersample, hold_weights
+from cappe.systems.statespace import band_limited_modal_response, check_intersample, hold_weights
 from cappe.systems.timedata import TimeData
 
 __all__ = ["FRFDerivatives", "OneStepEstimator", "OneStepFRFEstimator", "frf_derivatives"]
@@ -307,22 +307,11 @@ class _TimeModel:
 
     def _band_limited(self, modes: _Modes, u: Array, delay: float) -> Array:
         """Outputs for a band-limited input delayed by ``delay`` samples (exact: the delay is a linear phase)."""
-        lam, res = modes.lam, modes.cm[:, :, None] * modes.bm[None, :, :]  # (n_out, m, n_in), weights included
-        tau = delay * self.dt
-        if lam.size and np.any(lam.real >= 0):
+        if modes.lam.size and np.any(modes.lam.real >= 0):
             msg = "the model has an undamped or unstable mode; a band-limited simulation needs every mode to decay"
             raise ModelError(msg)
-
-        def transfer(omega: Array) -> CArray:
-            jw = 1j * omega[:, None]
-            # each kept mode stands for itself and its conjugate (weight 2 in cm) or is real (weight 1):
-            # 0.5 (r / (jw - lam) + conj(r) / (jw - conj(lam))) covers both
-            h = 0.5 * (np.einsum("oml,fm->fol", res, 1.0 / (jw - lam[None, :]))
-                       + np.einsum("oml,fm->fol", res.conj(), 1.0 / (jw - lam.conj()[None, :])))
-            return np.asarray((h + modes.d[None]) * np.exp(-1j * omega * tau)[:, None, None])
-
-        decay = float(np.min(-lam.real)) if lam.size else 1.0 / self.dt
-        return band_limited_response(transfer, u, self.dt, decay)
+        # each kept mode stands for itself and its conjugate (weight 2 in cm) or is real (weight 1)
+        return band_limited_modal_response(modes.lam, modes.bm, modes.cm, modes.d, u, self.dt, delay=delay)
 
     def segments(self, modes: _Modes, u: Array, delay: float, sigma: float, length: int) -> tuple[Array, Array]:
         """Exponentially weighted zero-state responses of consecutive segments (n_seg, length, n_out), and the
