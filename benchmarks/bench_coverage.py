@@ -12,15 +12,18 @@ method started from the model file's values. Per method and case: the share of p
 interval covers the truth, the worst relative error, and how many fits reported success (a fit that fails its
 residual tests or leaves parameters practically non-identifiable says so; coverage is counted over every pair).
 Each method gets ``--intersample`` as a user would give it: ``foh`` for ``lsim`` data, ``bl`` for the DAQ records
-(EKF: its only, held input).
+(EKF: ``foh``, a filter cannot step a band-limited input). BLAS runs on one thread, as a ``cappe`` command does.
 
 ``python -m benchmarks.bench_coverage`` runs the quick mode (one seed, 1 % noise, the DAQ simulator, one-step and
 two-step-tf: a few minutes); ``CAPPE_BENCH_FULL=1`` the full grid (3 simulators x 2 noise levels x 2 excitations x
-10 seeds x 5 methods: hours on a laptop).
+10 seeds x 5 methods: hours on a laptop). A part of the grid: ``python -m benchmarks.bench_coverage --methods
+one-step,ekf --simulators daq --noises 0.01,0.05 --inputs 1 --seeds 10 --out coverage_part`` (rows are written to
+``benchmarks/results/coverage_part.json`` after every case, so a long run that is stopped keeps what it finished).
 """
 
 from __future__ import annotations
 
+import argparse
 import os
 import time
 import warnings
@@ -32,6 +35,7 @@ import scipy.signal as sig
 from benchmarks._common import write_results
 from cappe.estimate import estimator_class
 from cappe.model import NumericModel, load_model
+from cappe.parallel import blas_threads
 from cappe.systems import TimeData
 
 FS = 2000.0
@@ -93,16 +97,16 @@ def record(kind: str, noise: float, seed: int, inputs: int) -> TimeData:
                                    **{n: y[:, k] for k, n in enumerate(names)}})
 
 
-def settings(method: str, kind: str) -> dict[str, Any]:
+def settings(method: str, kind: str, inputs: int) -> dict[str, Any]:
     if method in ("one-step", "two-step-tf", "two-step-zp"):
         return {"intersample": "foh" if kind == "lsim" else "bl"}
-    if method == "direct":
-        return {"instruments": "model"}
-    return {}
+    if method == "direct":  # the unexcited F2 is absent from the record, not zero: name the forces that act
+        return {"instruments": "model", "inputs": [f"F{j + 1}" for j in range(inputs)]}
+    return {"intersample": "foh"}  # ekf: the nearer of its two (zoh, foh) to lsim and DAQ records alike
 
 
 def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, ...], excitations: tuple[int, ...],
-        seeds: range) -> list[dict[str, Any]]:
+        seeds: range, out: str | None = None) -> list[dict[str, Any]]:
     nm = NumericModel(load_model("builtin:two-mass-rig"))
     rows = []
     for method in methods:
@@ -119,7 +123,7 @@ def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, .
                         with warnings.catch_warnings():
                             warnings.simplefilter("ignore")
                             est = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
-                                                          **settings(method, kind)).fit(data).estimate_
+                                                          **settings(method, kind, inputs)).fit(data).estimate_
                         for k, name in enumerate(est.names):
                             lo, hi = est.ci95[k]
                             covered += bool(np.isfinite(lo) and lo <= TRUTH[name] <= hi)
@@ -133,10 +137,30 @@ def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, .
                     print(f"{method:>12s} {kind:>9s} {100 * noise:3.0f} % F1{'+F2' if inputs == 2 else '   '} "
                           f"coverage {100 * row['coverage']:5.1f} %  worst {100 * worst:6.2f} %  "
                           f"success {successes}/{len(seeds)}  {row['seconds']:6.1f} s", flush=True)
+                    if out is not None:
+                        write_results(out, rows)
     return rows
 
 
 def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    parser.add_argument("--methods", help="comma-separated methods (default: the mode's)")
+    parser.add_argument("--simulators", help="comma-separated: lsim, daq, daq-delay")
+    parser.add_argument("--noises", help="comma-separated noise levels (0.01 = 1 %%)")
+    parser.add_argument("--inputs", help="comma-separated excitations: 1 (F1) and/or 2 (F1 + F2)")
+    parser.add_argument("--seeds", type=int, help="number of seeds (0, 1, ...)")
+    parser.add_argument("--out", default="coverage", help="result name in benchmarks/results (default coverage)")
+    args = parser.parse_args()
+    with blas_threads(1):  # as a cappe command runs (cappe.parallel.command_blas_threads)
+        _main(args)
+
+
+def _main(args: argparse.Namespace) -> None:
+    if any(v is not None for v in (args.methods, args.simulators, args.noises, args.inputs, args.seeds)):
+        rows = run(tuple((args.methods or "one-step").split(",")), tuple((args.simulators or "daq").split(",")),
+                   tuple(float(v) for v in (args.noises or "0.01").split(",")),
+                   tuple(int(v) for v in (args.inputs or "1").split(",")), range(args.seeds or 1), out=args.out)
+        return
     if os.environ.get("CAPPE_BENCH_FULL"):
         rows = run(METHODS, ("lsim", "daq", "daq-delay"), (0.01, 0.05), (1, 2), range(10))
     else:
