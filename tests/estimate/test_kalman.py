@@ -376,7 +376,8 @@ def test_result_document_round_trips(tmp_path, ekf_fit):
 
 def test_too_few_passes_warn_and_report_failure(rig):
     data = _record(rig, 300, 0.01)
-    with pytest.warns(ConvergenceWarning, match="ekf estimation did not converge: not converged after 2 passes"):
+    # two passes from the start leave the estimate short of the optimum: its output errors also fail the residual test
+    with pytest.warns(ConvergenceWarning, match="ekf estimation .*not converged after 2 passes"):
         est = ExtendedKalmanEstimator(rig, list(TRUTH), passes=2, tol=0.0).fit(data)
     assert not est.estimate_.success
 

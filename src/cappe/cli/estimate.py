@@ -261,5 +261,9 @@ def _text(result: Any, method: str) -> str:
             f"{'yes' if analysis.get('independent') else 'NO'}; white "
             + ", ".join(f"{o} {'yes' if ok else 'NO'}" for o, ok in white.items())
         )
+    covariance = diagnostics.get("covariance")
+    if isinstance(covariance, dict) and "kind" in covariance:
+        lines.append(f"intervals: {covariance['kind']} over {covariance.get('lags', '?')} lags (the residuals are "
+                     "correlated in time; the Gauss-Newton standard errors are in the JSON)")
     lines += [f"WARNING: {line}" for line in diagnostics.get("warnings", [])]
     return "\n".join(lines)

@@ -56,7 +56,12 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import jacobian_uncertainty
+from cappe.estimate._uncertainty import (
+    LocalUncertainty,
+    correlated_uncertainty,
+    jacobian_uncertainty,
+    newey_west_bandwidth,
+)
 from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
@@ -94,6 +99,10 @@ class DirectEstimator(Estimator):
         Iterations of the ``"model"`` instruments.
     derive_missing : bool
         Derive missing quantities by differentiation or integration instead of raising :class:`DataError`.
+    covariance : {"auto", "gauss-newton", "sandwich"}
+        Linear unknowns: ``"gauss-newton"``, ``s^2 (J^T J)^-1`` of the weighted equation errors (right for white
+        errors); ``"sandwich"``, the Newey-West covariance of errors correlated in time (one-step's); ``"auto"``
+        (default): the sandwich where an equation error fails the whiteness test (a warning says so).
 
     Attributes
     ----------
@@ -132,6 +141,7 @@ class DirectEstimator(Estimator):
         delay: int = 1,
         n_iter: int = 3,
         derive_missing: bool = False,
+        covariance: str = "auto",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -140,9 +150,13 @@ class DirectEstimator(Estimator):
         self.delay = delay
         self.n_iter = n_iter
         self.derive_missing = derive_missing
+        self.covariance = covariance
 
     # ------------------------------------------------------------------------------------------------------------
     def _check_settings(self) -> None:
+        if self.covariance not in ("auto", "gauss-newton", "sandwich"):
+            msg = f"covariance must be 'auto', 'gauss-newton' or 'sandwich'; got {self.covariance!r}"
+            raise DataError(msg)
         if self.instruments not in _INSTRUMENTS:
             msg = f"instruments must be None, 'model' or 'delayed'; got {self.instruments!r}"
             raise DataError(msg)
@@ -225,8 +239,10 @@ class DirectEstimator(Estimator):
                 weights = _residual_weights(a, b, theta, weights)
                 theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
                 history.append(space.mapping(theta))
-        residuals = ((b - a @ theta) * weights[:, None]).ravel()
+        errors = (b - a @ theta) * weights[:, None]  # (n_dof, n_s): weighted equation errors
+        residuals = errors.ravel()
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
+        unc = self._covariance(unc, eq, jac, errors, diagnostics)
         diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
         diagnostics["iterations"] = len(history)
         if len(history) > 1:
@@ -251,6 +267,39 @@ class DirectEstimator(Estimator):
             self.method, unc, cost=float(residuals @ residuals), success=success, message=message,
             diagnostics=diagnostics,
         )
+
+    def _covariance(self, unc: LocalUncertainty, eq: _Equations, jac: Array, errors: Array,
+                    diagnostics: dict[str, Any]) -> LocalUncertainty:
+        """``unc``, or its Newey-West sandwich where the equation errors are coloured (``covariance``).
+
+        The equation errors of each DOF are tested for whiteness (Ljung-Box, :func:`residual_analysis`); where one
+        fails and ``covariance="auto"``, or with ``covariance="sandwich"``, the covariance is the one-step's
+        sandwich (:func:`correlated_uncertainty`, bandwidth :func:`newey_west_bandwidth`) over the time steps, all
+        DOFs of a step in one block; for instruments the Jacobian is the projected regressors ``P A``.
+        """
+        from cappe.identify._residual_analysis import residual_analysis
+
+        n_dof, n_s = errors.shape
+        forces = eq.forces[:, eq.forces.shape[1] - n_s:]  # the delayed instruments drop the first samples
+        analysis = residual_analysis(residuals=errors.T, inputs=forces.T, output_names=list(eq.dofs),
+                                     input_names=[eq.model.input_names[c] for c in eq.columns]).to_dict()
+        coloured = [d for d, white in analysis["white"].items() if not white]
+        diagnostics["equation_errors_white"] = analysis["white"]
+        if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
+            return unc
+        lag = newey_west_bandwidth([n_s], analysis)
+        jac_t = jac.reshape(n_dof, n_s, -1).transpose(1, 0, 2).reshape(n_dof * n_s, -1)
+        hac = correlated_uncertainty(unc, jacobian=jac_t, residuals=errors.T.ravel(), block=n_dof, records=[n_s],
+                                     max_lag=lag)
+        diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
+                                     "gauss_newton_std": dict(zip(unc.names, unc.std.tolist(), strict=True))}
+        if coloured:
+            warns = list(diagnostics.get("warnings", []))
+            warns.append(f"equation errors of {', '.join(coloured)} are not white (Ljung-Box, level "
+                         f"{analysis['level']:g}): coloured noise or model error; the intervals are the Newey-West "
+                         f"sandwich over {lag} lags")
+            diagnostics["warnings"] = warns
+        return hac
 
     # -- non-linear unknowns ---------------------------------------------------------------------------------------
     def _fit_nonlinear(self, space: ParameterSpace, eq: _Equations, diagnostics: dict[str, Any]) -> ParameterEstimate:

@@ -57,6 +57,12 @@ information. Either information, whitened by the bounds prior, has eigenvalues t
 data know along a direction than the bounds do: below 1 the direction is undetermined, the parameters with weight
 above 0.1 in it are flagged non-identifiable (``std`` nan) and the direction is reported as a combination.
 
+**Residual tests.** Constant parameters: the output errors of the simulation at the estimate (from the fitted
+initial state) are tested as one-step's (MATLAB ``resid``, :func:`cappe.estimate._base.with_residual_tests`): errors that
+correlate with an input fail the fit (the model of the structure or of the inputs between samples is wrong),
+coloured errors warn and, with ``covariance="auto"``, switch the covariance to the Newey-West sandwich around the
+same information (the one-step's, :func:`cappe.estimate._uncertainty.newey_west_meat`).
+
 filterpy (``ExtendedKalmanFilter``, ``UnscentedKalmanFilter``) was judged and not used on the hot path: it calls
 the user's transition once per sigma point in a Python loop and copies its state several times per step, which
 costs more than the whole vectorized step here, and it offers neither the lazy exact linearization nor the state
@@ -67,7 +73,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -75,11 +81,11 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator
+from cappe.estimate._base import Estimator, with_residual_tests
 from cappe.estimate._one_step import _select as _select_channels
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import _NULL_WEIGHT, null_direction_text
+from cappe.estimate._uncertainty import _NULL_WEIGHT, newey_west_bandwidth, newey_west_meat, null_direction_text
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
@@ -537,6 +543,7 @@ class _KalmanEstimator(Estimator):
         initial_state: str = "estimate",
         inflation: float = 4.0,
         intersample: str = "zoh",
+        covariance: str = "auto",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -550,8 +557,12 @@ class _KalmanEstimator(Estimator):
         self.initial_state = initial_state
         self.inflation = inflation
         self.intersample = intersample
+        self.covariance = covariance
 
     def _check_settings(self) -> None:
+        if self.covariance not in ("auto", "gauss-newton", "sandwich"):
+            msg = f"covariance must be 'auto', 'gauss-newton' or 'sandwich'; got {self.covariance!r}"
+            raise DataError(msg)
         if check_intersample(self.intersample) == "bl":
             msg = f"intersample 'bl' does not apply to the {self._kind} Kalman filter: {BAND_LIMITED_REFUSAL}"
             raise DataError(msg)
@@ -623,8 +634,8 @@ class _KalmanEstimator(Estimator):
             if self.initial_state == "estimate":
                 x0, p_x = _initial_state(aug, theta, w, y, r_std)
             # the initial state is a nuisance parameter with the prior of the first pass
-            cov_u, info, newton = self._uncertainty(aug, result, theta, x0, p_first, w, y, r_std, prior_var, q_theta,
-                                                  constant)
+            cov_u, info, newton, errors = self._uncertainty(aug, result, theta, x0, p_first, w, y, r_std, prior_var,
+                                                            q_theta, constant)
             sigma = np.sqrt(np.maximum(np.diagonal(cov_u), 0.0))
             determined = _identifiability(info, prior_var, space.names)[0]
             # converged: every determined parameter moved by less than tol or a quarter of its standard error
@@ -635,8 +646,32 @@ class _KalmanEstimator(Estimator):
             p_theta = self.inflation * cov_u if constant else np.diag(prior_var)
             cap = np.sqrt(np.minimum(1.0, prior_var / np.maximum(np.diagonal(p_theta), 1e-300)))
             p_theta = p_theta * np.outer(cap, cap)
-        return self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
-                            prior_var, cov_u, info, newton, constant)
+        estimate = self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
+                                prior_var, cov_u, info, newton, constant)
+        if errors is None or not np.all(np.isfinite(estimate.values)):
+            return estimate
+        # the output errors at the estimate, tested as one-step's (MATLAB resid): a filter whose model of the
+        # inputs between samples (or of the structure) is wrong fails here instead of returning a confident number
+        jac, residual, regular = errors
+        n_samples = y.shape[0]
+        output_errors = residual.reshape(n_samples, aug.m) * r_std[None, :]
+        tested = with_residual_tests(estimate, [output_errors], [record.w], record.outputs, record.inputs)
+        analysis = tested.diagnostics.get("residual_analysis", {})
+        coloured = "white" in analysis and not all(analysis["white"].values())
+        if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
+            return tested
+        # the Newey-West sandwich around the regularized output-error information (its bread)
+        lag = newey_west_bandwidth([n_samples], analysis)
+        bread = np.linalg.inv(regular)
+        meat = newey_west_meat(jacobian=jac, residuals=residual, block=aug.m, records=[n_samples], max_lag=lag)
+        sandwich = _symmetric(bread @ meat @ bread)[: space.n, : space.n]
+        estimate = self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
+                                prior_var, sandwich, info, newton, constant)
+        diagnostics = dict(estimate.diagnostics)
+        diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
+                                     "gauss_newton_std": dict(zip(space.names, tested.std.tolist(), strict=True))}
+        return with_residual_tests(replace(estimate, diagnostics=diagnostics), [output_errors], [record.w],
+                                   record.outputs, record.inputs)
 
     @staticmethod
     def _uncertainty(
@@ -651,8 +686,9 @@ class _KalmanEstimator(Estimator):
         prior_var: Array,
         q_theta: Array,
         constant: bool,
-    ) -> tuple[Array, Array, Array]:
-        """Covariance of theta (internal), the information the data carry about it, and a Gauss-Newton step.
+    ) -> tuple[Array, Array, Array, tuple[Array, Array, Array] | None]:
+        """Covariance of theta (internal), the information the data carry about it, a Gauss-Newton step, and (for
+        constant parameters) the output errors' ``J``, ``r`` and the regularized information (for the sandwich).
 
         Constant parameters and a trusted model (no process noise): the output-error Fisher information at the
         estimate, with the initial state as a nuisance parameter (its prior as in the filter). This is what the
@@ -666,15 +702,16 @@ class _KalmanEstimator(Estimator):
         if not constant:
             prior_end = result.start_cov + np.diag(q_theta) * w.shape[0]
             info = _symmetric(np.linalg.inv(result.cov[:nt, :nt]) - np.linalg.inv(_symmetric(prior_end)))
-            return result.cov[:nt, :nt], info, np.full(nt, np.nan)
-        full, gradient = _output_error_information(aug, theta, x0, w, y, r_std)
+            return result.cov[:nt, :nt], info, np.full(nt, np.nan), None
+        full, gradient, jac, residual = _output_error_information(aug, theta, x0, w, y, r_std)
         a, b, d = full[:nt, :nt], full[:nt, nt:], full[nt:, nt:] + np.linalg.inv(p_x)
         info = _symmetric(a - b @ np.linalg.solve(d, b.T))
         regular = full.copy()
         regular[:nt, :nt] += np.diag(1.0 / prior_var)
         regular[nt:, nt:] += np.linalg.inv(p_x)
         newton = np.asarray(np.linalg.solve(_symmetric(regular), gradient)[:nt], dtype=float)
-        return _symmetric(np.linalg.inv(info + np.diag(1.0 / prior_var))), info, newton
+        return (_symmetric(np.linalg.inv(info + np.diag(1.0 / prior_var))), info, newton,
+                (jac, residual, _symmetric(regular)))
 
     @abstractmethod
     def _run(self, aug: _Augmented, z0: Array, p0: Array, q: Array, r: Array, w: Array, y: Array) -> _Pass:
@@ -836,8 +873,9 @@ def _initial_state(aug: _Augmented, theta: Array, w: Array, y: Array, r_std: Arr
 
 def _output_error_information(
     aug: _Augmented, theta: Array, x0: Array, w: Array, y: Array, r_std: Array
-) -> tuple[Array, Array]:
-    """Fisher information about ``[theta, x0]`` of the outputs simulated at theta from x0, and ``J^T r``.
+) -> tuple[Array, Array, Array, Array]:
+    """Fisher information about ``[theta, x0]`` of the outputs simulated at theta from x0, ``J^T r``, and ``J``
+    (N m, n_theta + 2n, time-major) and ``r`` (N m) themselves.
 
     Sensitivities by the exact discrete recursion ``S[k+1] = Ad S[k] + dAd/dtheta x[k] + dBd/dtheta w[k]``
     (``w`` the transition's input rows, :meth:`_Augmented.inputs`)
@@ -866,7 +904,8 @@ def _output_error_information(
         states[:, 1:] = rest
     weighted = (jac / r_std[None, :, None]).reshape(-1, nt + n_x)
     residual = ((y - simulated) / r_std).ravel()
-    return np.asarray(weighted.T @ weighted, dtype=float), np.asarray(weighted.T @ residual, dtype=float)
+    return (np.asarray(weighted.T @ weighted, dtype=float), np.asarray(weighted.T @ residual, dtype=float),
+            np.asarray(weighted, dtype=float), np.asarray(residual, dtype=float))
 
 
 def _identifiability(
@@ -930,6 +969,11 @@ class ExtendedKalmanEstimator(_KalmanEstimator):
         The inputs between samples (:mod:`cappe.systems.statespace`): held (default) or linear (what
         :func:`scipy.signal.lsim` simulates; the nearer of the two to a band-limited DAQ record). ``"bl"`` is
         refused with the reason (module notes): fit band-limited data with ``one-step``.
+    covariance : {"auto", "gauss-newton", "sandwich"}
+        Constant parameters: ``"gauss-newton"``, the inverse output-error information (right for white output
+        errors); ``"sandwich"``, the Newey-West covariance of output errors correlated in time around it
+        (:func:`cappe.estimate._uncertainty.newey_west_meat`, as one-step's); ``"auto"`` (default): the sandwich
+        where the output errors fail the whiteness test. Tracking: the filter's covariance.
 
     Notes
     -----
@@ -1030,7 +1074,9 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
     ----------
     model, unknowns, bounds, start, values, rng
         See :class:`Estimator`.
-    inputs, outputs, position, noise, process_noise, random_walk, passes, tol, initial_state, inflation, intersample
+    inputs, outputs, position, noise, process_noise, random_walk, passes, tol, initial_state, inflation
+        As for :class:`ExtendedKalmanEstimator`.
+    intersample, covariance
         As for :class:`ExtendedKalmanEstimator`.
     alpha : float
         Spread of the sigma points around the mean, 0 < alpha <= 1 (dimensionless).
@@ -1074,6 +1120,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         initial_state: str = "estimate",
         inflation: float = 4.0,
         intersample: str = "zoh",
+        covariance: str = "auto",
         alpha: float = 1.0,
         beta: float = 2.0,
         kappa: float = 0.0,
@@ -1081,7 +1128,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng, inputs=inputs,
                          outputs=outputs, position=position, noise=noise, process_noise=process_noise,
                          random_walk=random_walk, passes=passes, tol=tol, initial_state=initial_state,
-                         inflation=inflation, intersample=intersample)
+                         inflation=inflation, intersample=intersample, covariance=covariance)
         self.alpha = alpha
         self.beta = beta
         self.kappa = kappa

@@ -61,7 +61,12 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, Fitted, honest_intervals, least_squares_fit, with_residual_tests
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import correlated_uncertainty, jacobian_uncertainty, null_direction_text
+from cappe.estimate._uncertainty import (
+    correlated_uncertainty,
+    jacobian_uncertainty,
+    newey_west_bandwidth,
+    null_direction_text,
+)
 from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.model.numeric import ParamsLike
@@ -357,14 +362,7 @@ def _sandwich(result: ParameterEstimate, space: ParameterSpace, jacobian: Array,
 
     The bandwidth is twice the lag beyond which every output's residual autocorrelation stays inside its 99 %
     bound (at least the Newey-West rule ``4 (N / 100)^(2/9)``, at most N / 10 or 500 samples)."""
-    n = min(records)
-    rule = int(np.floor(4 * (sum(records) / 100) ** (2 / 9)))
-    inside = rule
-    if "autocorrelation" in analysis:
-        acf = np.abs(np.asarray(analysis["autocorrelation"], dtype=float))[:, 1:]
-        outside = np.flatnonzero(np.any(acf > float(analysis["auto_bound"]), axis=0))
-        inside = int(outside.max()) + 2 if outside.size else 0
-    lag = int(min(max(rule, 2 * inside), n // 10, 500))
+    lag = newey_west_bandwidth(records, analysis)
     base = jacobian_uncertainty(names=space.names, values=result.values, jacobian=jacobian, residuals=residuals)
     hac = correlated_uncertainty(base, jacobian=jacobian, residuals=residuals, block=n_out, records=records,
                                  max_lag=lag)
