@@ -58,10 +58,10 @@ data know along a direction than the bounds do: below 1 the direction is undeter
 above 0.1 in it are flagged non-identifiable (``std`` nan) and the direction is reported as a combination.
 
 **Residual tests.** Constant parameters: the output errors of the simulation at the estimate (from the fitted
-initial state) are tested as one-step's (MATLAB ``resid``, :func:`cappe.estimate._base.with_residual_tests`): errors that
-correlate with an input fail the fit (the model of the structure or of the inputs between samples is wrong),
-coloured errors warn and, with ``covariance="auto"``, switch the covariance to the Newey-West sandwich around the
-same information (the one-step's, :func:`cappe.estimate._uncertainty.newey_west_meat`).
+initial state) are tested as one-step's (MATLAB ``resid``, :func:`cappe.estimate._base.with_residual_tests`):
+errors that correlate with an input fail the fit (the model of the structure or of the inputs between samples is
+wrong), coloured errors warn and, with ``covariance="auto"``, switch the covariance to the Newey-West sandwich
+around the same information (the one-step's, :func:`cappe.estimate._uncertainty.newey_west_meat`).
 
 filterpy (``ExtendedKalmanFilter``, ``UnscentedKalmanFilter``) was judged and not used on the hot path: it calls
 the user's transition once per sigma point in a Python loop and copies its state several times per step, which
