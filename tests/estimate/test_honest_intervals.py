@@ -79,7 +79,7 @@ def test_direct_switches_to_the_sandwich_on_coloured_equation_errors(two_mass):
     assert est.diagnostics["covariance"]["kind"] == "sandwich (Newey-West)"
     gn = np.array([est.diagnostics["covariance"]["gauss_newton_std"][n] for n in est.names])
     assert np.all(est.std > gn)
-    assert any("equation errors of" in w and "not white" in w for w in est.diagnostics["warnings"])
+    assert any("not white" in w for w in est.diagnostics["warnings"])
     white = clean.values.copy()
     white[1:] += 0.01 * np.sqrt(np.mean(white[1:] ** 2, axis=1, keepdims=True)) * rng.standard_normal(white[1:].shape)
     plain = _fit(two_mass, "direct", TimeData(clean.time, white, clean.channels, clean.units), instruments="model",

@@ -242,7 +242,9 @@ class DirectEstimator(Estimator):
         errors = (b - a @ theta) * weights[:, None]  # (n_dof, n_s): weighted equation errors
         residuals = errors.ravel()
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
-        unc = self._covariance(unc, eq, jac, errors, diagnostics)
+        raw = b - a @ theta  # unweighted (N): an exact fit leaves round-off of the forces' size times 1e-16
+        exact = bool(np.sqrt(np.mean(raw**2)) <= 1e-8 * np.sqrt(np.mean(b**2)))
+        unc = self._covariance(unc, eq, jac, errors, diagnostics, exact=exact)
         diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
         diagnostics["iterations"] = len(history)
         if len(history) > 1:
@@ -269,11 +271,13 @@ class DirectEstimator(Estimator):
         )
 
     def _covariance(self, unc: LocalUncertainty, eq: _Equations, jac: Array, errors: Array,
-                    diagnostics: dict[str, Any]) -> LocalUncertainty:
+                    diagnostics: dict[str, Any], *, exact: bool) -> LocalUncertainty:
         """``unc``, or its Newey-West sandwich where the equation errors are coloured (``covariance``).
 
-        The equation errors of each DOF are tested for whiteness (Ljung-Box, :func:`residual_analysis`); where one
-        fails and ``covariance="auto"``, or with ``covariance="sandwich"``, the covariance is the one-step's
+        The equation errors of each DOF are tested as one-step's output errors (:func:`residual_analysis`: whiteness,
+        and independence of the forces, whose failure means the equations do not hold at the samples, e.g. a delay
+        between the force and the response channels; it warns, the sandwich does not cure a bias); where one is not
+        white and ``covariance="auto"``, or with ``covariance="sandwich"``, the covariance is the one-step's
         sandwich (:func:`correlated_uncertainty`, bandwidth :func:`newey_west_bandwidth`) over the time steps, all
         DOFs of a step in one block; for instruments the Jacobian is the projected regressors ``P A``.
         """
@@ -281,10 +285,16 @@ class DirectEstimator(Estimator):
 
         n_dof, n_s = errors.shape
         forces = eq.forces[:, eq.forces.shape[1] - n_s:]  # the delayed instruments drop the first samples
-        analysis = residual_analysis(residuals=errors.T, inputs=forces.T, output_names=list(eq.dofs),
-                                     input_names=[eq.model.input_names[c] for c in eq.columns]).to_dict()
+        if exact and self.covariance != "sandwich":
+            return unc  # an exact fit (noise-free data): round-off is not tested
+        tests = residual_analysis(residuals=errors.T, inputs=forces.T, output_names=list(eq.dofs),
+                                  input_names=[eq.model.input_names[c] for c in eq.columns])
+        analysis = tests.to_dict()
         coloured = [d for d, white in analysis["white"].items() if not white]
         diagnostics["equation_errors_white"] = analysis["white"]
+        diagnostics["residual_analysis"] = analysis
+        if tests.warnings():
+            diagnostics["warnings"] = [*diagnostics.get("warnings", []), *tests.warnings()]
         if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
             return unc
         lag = newey_west_bandwidth([n_s], analysis)
@@ -293,12 +303,6 @@ class DirectEstimator(Estimator):
                                      max_lag=lag)
         diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
                                      "gauss_newton_std": dict(zip(unc.names, unc.std.tolist(), strict=True))}
-        if coloured:
-            warns = list(diagnostics.get("warnings", []))
-            warns.append(f"equation errors of {', '.join(coloured)} are not white (Ljung-Box, level "
-                         f"{analysis['level']:g}): coloured noise or model error; the intervals are the Newey-West "
-                         f"sandwich over {lag} lags")
-            diagnostics["warnings"] = warns
         return hac
 
     # -- non-linear unknowns ---------------------------------------------------------------------------------------
