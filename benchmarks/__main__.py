@@ -8,6 +8,7 @@ from benchmarks import (
     bench_estimate,
     bench_flexible,
     bench_identify,
+    bench_intersample,
     bench_lm,
     bench_matrices,
     bench_modal,
@@ -29,6 +30,7 @@ def main() -> None:
     bench_sobol.main()
     bench_identify.main()
     bench_estimate.main()
+    bench_intersample.main()
     bench_coverage.main()
     bench_monitor.main()
     bench_pipeline.main()

@@ -93,6 +93,54 @@ def test_linearization_is_the_exact_zoh_and_its_derivative(rig):
         assert np.abs(fd).max() > 1e5 * 1e-9 * np.abs(w0).max()  # far above the tolerance
 
 
+def test_linearization_with_a_linear_input_is_the_exact_foh_and_its_derivative(rig):
+    """FOH: ``x[k+1] = Ad x[k] + B0 w[k] + B1 w[k+1]`` against scipy's expm of the hold block matrix (the construction
+    of scipy.signal.cont2discrete's foh), and its derivative against central differences of that reference."""
+    data = _record(rig, 200, 0.0, outputs=["d1", "v2", "a1"])
+    space = ParameterSpace.from_model(rig, ["m1", "k12", "c22"])
+    record = kalman._select(rig, data, None, None)
+    aug = kalman._Augmented(rig, space, record, None, "foh")
+    xs, ws, ys = aug.x_scale, aug.w_scale, aug.y_scale
+
+    def reference(theta):
+        ss = rig.system(space.full(space.from_internal(theta))).state_space(["F1", "F2"], ["d1", "v2", "a1"])
+        n, m = ss.B.shape
+        big = np.zeros((n + 2 * m, n + 2 * m))
+        big[:n, :n], big[:n, n: n + m], big[n: n + m, n + m:] = ss.A / FS, ss.B / FS, np.eye(m)
+        e = sla.expm(big)
+        ad, b1 = e[:n, :n], e[:n, n + m:]
+        b0 = e[:n, n: n + m] - b1
+        top = np.hstack([ad * xs[None] / xs[:, None], b0 * ws[None] / xs[:, None], b1 * ws[None] / xs[:, None]])
+        bottom = np.hstack([ss.C * xs[None] / ys[:, None], ss.D * ws[None] / ys[:, None], np.zeros((3, m))])
+        return np.vstack([top, bottom])
+
+    theta = space.to_internal([1.2, 1.5e5, 1.0])
+    w0, dw = aug.linearize(theta)
+    np.testing.assert_allclose(w0, reference(theta), rtol=1e-10, atol=1e-12)  # both exact FOH
+    phi, out = aug.discrete(theta[None, :])
+    np.testing.assert_allclose(np.vstack([phi[0], out[0]]), reference(theta), rtol=1e-10, atol=1e-12)
+    assert np.abs(w0[:4, 6:]).max() > 0.1 * np.abs(w0[:4, 4:6]).max()  # B1 is not zero: a linear input
+    h = 1e-5
+    for j in range(space.n):
+        step = np.eye(space.n)[j] * h
+        fd = (reference(theta + step) - reference(theta - step)) / (2 * h)
+        # the tolerance of the ZOH case above (truncation h^2, round-off 1e-16 / h)
+        np.testing.assert_allclose(dw[j], fd, rtol=0, atol=1e-9 * np.abs(w0).max())
+    w = record.w / aug.w_scale
+    rows = aug.inputs(w)
+    np.testing.assert_array_equal(rows[:-1], np.hstack([w[:-1], w[1:]]))  # [w[k], w[k + 1]]
+
+
+def test_band_limited_input_is_refused_with_the_reason(rig):
+    data = _record(rig, 200, 0.0, outputs=["d1"])
+    for cls in (ExtendedKalmanEstimator, UnscentedKalmanEstimator):
+        with pytest.raises(DataError, match="intersample 'bl' does not apply to the .* Kalman filter: a Kalman "
+                                            "filter steps from one sample to the next.*use intersample 'foh'"):
+            cls(rig, ["k11"], intersample="bl").fit(data)
+        with pytest.raises(DataError, match="intersample must be one of zoh, foh, bl"):
+            cls(rig, ["k11"], intersample="linear").fit(data)
+
+
 class _Filterpy:
     """Transition and output functions for filterpy from the model's state space and scipy's ZOH."""
 
@@ -328,7 +376,8 @@ def test_result_document_round_trips(tmp_path, ekf_fit):
 
 def test_too_few_passes_warn_and_report_failure(rig):
     data = _record(rig, 300, 0.01)
-    with pytest.warns(ConvergenceWarning, match="ekf estimation did not converge: not converged after 2 passes"):
+    # two passes from the start leave the estimate short of the optimum: its output errors also fail the residual test
+    with pytest.warns(ConvergenceWarning, match="ekf estimation .*not converged after 2 passes"):
         est = ExtendedKalmanEstimator(rig, list(TRUTH), passes=2, tol=0.0).fit(data)
     assert not est.estimate_.success
 

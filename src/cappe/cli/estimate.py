@@ -7,6 +7,7 @@ import inspect
 import json
 import sys
 import warnings
+from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
 
@@ -34,8 +35,8 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                         "(repeatable; VALUE is JSON or a plain string)")
     p.add_argument("--intersample", choices=["zoh", "foh", "bl"],
                    help="time data: the inputs between samples. Default bl (band-limited), what a DAQ with an "
-                        "anti-alias filter records, for one-step and two-step; ekf and ukf model a held input (zoh) "
-                        "only; direct needs no assumption")
+                        "anti-alias filter records, for one-step and two-step; ekf and ukf: zoh (default) or foh "
+                        "(no filter can step a band-limited input); direct needs no assumption")
     p.add_argument("--plot", metavar="FILE.png", help="correlation matrix (EKF/UKF: parameter trajectories)")
     p.add_argument("--plot-landscape", metavar="A,B:FILE.png",
                    help="the method's cost over unknowns A and B around the optimum (least-squares methods)")
@@ -123,8 +124,12 @@ def run(args: argparse.Namespace) -> int:
     cls = estimator_class(args.method)
     options = settings(args.setting)
     takes = inspect.signature(cls.__init__).parameters
+    refused: Mapping[str, str] = getattr(cls, "intersample_refused", {})
+    if "intersample" in takes and have == "time" and args.intersample in refused:
+        msg = f"--intersample {args.intersample} does not apply to method {args.method!r}: {refused[args.intersample]}"
+        raise UsageError(msg)
     if "intersample" in takes and have == "time":
-        options.setdefault("intersample", args.intersample or "bl")
+        options.setdefault("intersample", args.intersample or getattr(cls, "intersample_default", "bl"))
     elif args.intersample not in (None, "zoh") or (args.intersample and have != "time"):
         msg = (
             f"--intersample {args.intersample} does not apply to method {args.method!r} on {have} data"
@@ -266,5 +271,9 @@ def _text(result: Any, method: str) -> str:
                      f"p = {second['p_value']:.3g} (level {second['level']:g}): {verdict}"
                      + ("" if second["passed"] else
                         f"; standard errors scaled by {np.sqrt(second['covariance_scale']):.3g}"))
+    covariance = diagnostics.get("covariance")
+    if isinstance(covariance, dict) and "kind" in covariance:
+        lines.append(f"intervals: {covariance['kind']} over {covariance.get('lags', '?')} lags (the residuals are "
+                     "correlated in time; the Gauss-Newton standard errors are in the JSON)")
     lines += [f"WARNING: {line}" for line in diagnostics.get("warnings", [])]
     return "\n".join(lines)

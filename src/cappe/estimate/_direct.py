@@ -57,7 +57,12 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import jacobian_uncertainty
+from cappe.estimate._uncertainty import (
+    LocalUncertainty,
+    correlated_uncertainty,
+    jacobian_uncertainty,
+    newey_west_bandwidth,
+)
 from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
@@ -97,6 +102,10 @@ class DirectEstimator(Estimator):
         Iterations of the ``"model"`` instruments.
     derive_missing : bool
         Derive missing quantities by differentiation or integration instead of raising :class:`DataError`.
+    covariance : {"auto", "gauss-newton", "sandwich"}
+        Linear unknowns: ``"gauss-newton"``, ``s^2 (J^T J)^-1`` of the weighted equation errors (right for white
+        errors); ``"sandwich"``, the Newey-West covariance of errors correlated in time (one-step's); ``"auto"``
+        (default): the sandwich where an equation error fails the whiteness test (a warning says so).
 
     Attributes
     ----------
@@ -135,6 +144,7 @@ class DirectEstimator(Estimator):
         delay: int = 1,
         n_iter: int = 3,
         derive_missing: bool = False,
+        covariance: str = "auto",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -143,9 +153,13 @@ class DirectEstimator(Estimator):
         self.delay = delay
         self.n_iter = n_iter
         self.derive_missing = derive_missing
+        self.covariance = covariance
 
     # ------------------------------------------------------------------------------------------------------------
     def _check_settings(self) -> None:
+        if self.covariance not in ("auto", "gauss-newton", "sandwich"):
+            msg = f"covariance must be 'auto', 'gauss-newton' or 'sandwich'; got {self.covariance!r}"
+            raise DataError(msg)
         if self.instruments not in _INSTRUMENTS:
             msg = f"instruments must be None, 'model' or 'delayed'; got {self.instruments!r}"
             raise DataError(msg)
@@ -252,8 +266,12 @@ class DirectEstimator(Estimator):
             diagnostics["warnings"] = [*diagnostics.get("warnings", []), line]
             message += f"; estimate at a bound for {at_bound}"
             warnings.warn(f"direct estimate outside the bounds for {outside}; {line}", DataWarning, stacklevel=4)
-        residuals = ((b - a @ theta) * weights[:, None]).ravel()
+        errors = (b - a @ theta) * weights[:, None]  # (n_dof, n_s): weighted equation errors
+        residuals = errors.ravel()
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
+        raw = b - a @ theta  # unweighted (N): an exact fit leaves round-off of the forces' size times 1e-16
+        exact = bool(np.sqrt(np.mean(raw**2)) <= 1e-8 * np.sqrt(np.mean(b**2)))
+        unc = self._covariance(unc, eq, jac, errors, diagnostics, exact=exact)
         if at_bound:  # an estimate held by its bound has no Gauss-Newton interval
             held = np.isin(np.array(space.names), at_bound)
             ci = unc.ci95.copy()
@@ -271,6 +289,41 @@ class DirectEstimator(Estimator):
             self.method, unc, cost=float(residuals @ residuals), success=success, message=message,
             diagnostics=diagnostics,
         )
+
+    def _covariance(self, unc: LocalUncertainty, eq: _Equations, jac: Array, errors: Array,
+                    diagnostics: dict[str, Any], *, exact: bool) -> LocalUncertainty:
+        """``unc``, or its Newey-West sandwich where the equation errors are coloured (``covariance``).
+
+        The equation errors of each DOF are tested as one-step's output errors (:func:`residual_analysis`: whiteness,
+        and independence of the forces, whose failure means the equations do not hold at the samples, e.g. a delay
+        between the force and the response channels; it warns, the sandwich does not cure a bias); where one is not
+        white and ``covariance="auto"``, or with ``covariance="sandwich"``, the covariance is the one-step's
+        sandwich (:func:`correlated_uncertainty`, bandwidth :func:`newey_west_bandwidth`) over the time steps, all
+        DOFs of a step in one block; for instruments the Jacobian is the projected regressors ``P A``.
+        """
+        from cappe.identify._residual_analysis import residual_analysis
+
+        n_dof, n_s = errors.shape
+        forces = eq.forces[:, eq.forces.shape[1] - n_s:]  # the delayed instruments drop the first samples
+        if exact and self.covariance != "sandwich":
+            return unc  # an exact fit (noise-free data): round-off is not tested
+        tests = residual_analysis(residuals=errors.T, inputs=forces.T, output_names=list(eq.dofs),
+                                  input_names=[eq.model.input_names[c] for c in eq.columns])
+        analysis = tests.to_dict()
+        coloured = [d for d, white in analysis["white"].items() if not white]
+        diagnostics["equation_errors_white"] = analysis["white"]
+        diagnostics["residual_analysis"] = analysis
+        if tests.warnings():
+            diagnostics["warnings"] = [*diagnostics.get("warnings", []), *tests.warnings()]
+        if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
+            return unc
+        lag = newey_west_bandwidth([n_s], analysis)
+        jac_t = jac.reshape(n_dof, n_s, -1).transpose(1, 0, 2).reshape(n_dof * n_s, -1)
+        hac = correlated_uncertainty(unc, jacobian=jac_t, residuals=errors.T.ravel(), block=n_dof, records=[n_s],
+                                     max_lag=lag)
+        diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
+                                     "gauss_newton_std": dict(zip(unc.names, unc.std.tolist(), strict=True))}
+        return hac
 
     # -- non-linear unknowns ---------------------------------------------------------------------------------------
     def _fit_nonlinear(self, space: ParameterSpace, eq: _Equations, diagnostics: dict[str, Any]) -> ParameterEstimate:

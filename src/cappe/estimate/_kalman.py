@@ -3,15 +3,21 @@
 The augmented state is ``z = [theta, q, q']``: ``theta`` are the unknowns in the parameter space's internal
 coordinates (``log p`` for bounded positive parameters, so masses and stiffnesses stay positive and the random walk
 is relative), ``q, q'`` the displacements and velocities of the model's DOFs. Between samples the inputs are held
-(zero-order hold) and the parameters follow a random walk, so the transition is
+(zero-order hold, ``intersample="zoh"``) or linear (first-order hold, ``"foh"``: what :func:`scipy.signal.lsim`
+simulates, and the nearer of the two to a band-limited DAQ record) and the parameters follow a random walk, so the
+transition is
 
-    x[k+1] = Ad(theta) x[k] + Bd(theta) w[k],        theta[k+1] = theta[k] + random walk,
+    x[k+1] = Ad(theta) x[k] + B0(theta) w[k] + B1(theta) w[k+1],        theta[k+1] = theta[k] + random walk,
 
-with ``Ad = expm(A dt)`` and ``Bd`` the exact ZOH of the continuous model at ``theta``. The measurements are the
+with ``Ad = expm(A dt)`` and ``B0, B1`` the exact hold weights of the continuous model at ``theta``
+(:func:`cappe.systems.statespace.hold_matrices`; ``B1 = 0`` for a held input). The next input ``w[k+1]`` is a
+recorded sample, so the linear input needs no extra state. A band-limited input (``"bl"``) is refused: between two
+samples it depends on every sample of the record (its interpolation is non-causal and unbounded), so no transition
+from one sample to the next exists for a filter to step with. The measurements are the
 model's named outputs (displacement ``S q``, velocity ``S q'``, acceleration ``S M^-1 (B w - C q' - K q)``).
 
 **EKF.** The transition and its Jacobian with respect to theta are exact at a linearization point ``theta0``:
-``Ad, Bd`` and their derivatives come from one matrix exponential of a block-triangular matrix (Van Loan 1978:
+``Ad, B0, B1`` and their derivatives come from one matrix exponential of a block-triangular matrix (Van Loan 1978:
 the upper blocks of ``expm([[Z, E_j], [0, Z]])`` are the Frechet derivatives of ``expm`` at ``Z`` in direction
 ``E_j``), with ``dA/dtheta`` from the exact affine matrix derivatives of M, C and K. Between re-linearizations
 the filter uses the first-order expansion ``Ad(theta0) + sum_j dAd_j (theta - theta0)_j``; a new exact
@@ -22,10 +28,10 @@ definite where the short form ``(I - KH) P`` loses it by round-off (the state mi
 log parameters of order 1; the states are also scaled to unit RMS for the same reason).
 
 **UKF.** Sigma points (scaled unscented transform, Wan & van der Merwe 2000) of the augmented state; each sigma
-point is propagated through the exact ZOH of the model at its own theta. With the state ordered ``[theta, x]``
-and an upper Cholesky factor, only ``2 n_theta + 1`` distinct parameter vectors occur per step; their matrix
-exponentials are computed as one batch (:func:`expm_batch`). The process noise is added before the propagation,
-so that the sigma points the measurement update sees carry the parameters' random walk.
+point is propagated through the exact transition (ZOH or FOH) of the model at its own theta. With the state
+ordered ``[theta, x]`` and an upper Cholesky factor, only ``2 n_theta + 1`` distinct parameter vectors occur per
+step; their matrix exponentials are computed as one batch (:func:`expm_batch`). The process noise is added before
+the propagation, so that the sigma points the measurement update sees carry the parameters' random walk.
 
 **Convergence.** One forward pass of an EKF from a poor start over a record of a lightly damped system is known
 to stall or diverge (the thesis's seven-parameter case, 5.3.4.3). Here: internal coordinates; states, inputs and
@@ -51,6 +57,12 @@ information. Either information, whitened by the bounds prior, has eigenvalues t
 data know along a direction than the bounds do: below 1 the direction is undetermined, the parameters with weight
 above 0.1 in it are flagged non-identifiable (``std`` nan) and the direction is reported as a combination.
 
+**Residual tests.** Constant parameters: the output errors of the simulation at the estimate (from the fitted
+initial state) are tested as one-step's (MATLAB ``resid``, :func:`cappe.estimate._base.with_residual_tests`):
+errors that correlate with an input fail the fit (the model of the structure or of the inputs between samples is
+wrong), coloured errors warn and, with ``covariance="auto"``, switch the covariance to the Newey-West sandwich
+around the same information (the one-step's, :func:`cappe.estimate._uncertainty.newey_west_meat`).
+
 filterpy (``ExtendedKalmanFilter``, ``UnscentedKalmanFilter``) was judged and not used on the hot path: it calls
 the user's transition once per sigma point in a Python loop and copies its state several times per step, which
 costs more than the whole vectorized step here, and it offers neither the lazy exact linearization nor the state
@@ -61,7 +73,7 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, ClassVar
 
 import numpy as np
@@ -69,14 +81,15 @@ from numpy.typing import NDArray
 from scipy import stats
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator
+from cappe.estimate._base import Estimator, with_residual_tests
 from cappe.estimate._one_step import _select as _select_channels
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import _NULL_WEIGHT, null_direction_text
+from cappe.estimate._uncertainty import _NULL_WEIGHT, newey_west_bandwidth, newey_west_meat, null_direction_text
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 from cappe.systems.mechanical import DERIVATIVE_ORDER
+from cappe.systems.statespace import check_intersample
 from cappe.systems.timedata import TimeData
 
 __all__ = ["ExtendedKalmanEstimator", "UnscentedKalmanEstimator"]
@@ -95,6 +108,13 @@ _REST_VAR = 1e-12
 _X0_SAMPLES = 2000
 #: Measurement noise (fraction of each output's RMS) of the first pass when none is given.
 _FIRST_NOISE = 0.05
+#: Why the filters refuse a band-limited input (module notes).
+BAND_LIMITED_REFUSAL = (
+    "a Kalman filter steps from one sample to the next, and a band-limited input between two samples depends on "
+    "every sample of the record (its interpolation is non-causal and unbounded), so no such step exists; fit "
+    "band-limited data with one-step, or use intersample 'foh' here (its gain error is about (omega h)^2 / 12 "
+    "at omega, h the sample time)"
+)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -186,7 +206,8 @@ class _Augmented:
     """The model's continuous state space over theta (internal coordinates), scaled to unit RMS signals.
 
     States, inputs and outputs are divided by their RMS values (states: from a simulation at the start
-    parameters), so that every block of the filter's covariance is of order one.
+    parameters), so that every block of the filter's covariance is of order one. The transition takes the rows of
+    :meth:`inputs`: ``w[k]``, and ``w[k + 1]`` too for a linear input.
     """
 
     def __init__(
@@ -195,8 +216,10 @@ class _Augmented:
         space: ParameterSpace,
         record: _Record,
         position: Mapping[str, float] | None,
+        intersample: str = "zoh",
     ) -> None:
         self.nm, self.space, self.position = nm, space, position
+        self.intersample = intersample
         n = self.n = nm.n_dof
         self.n_theta = space.n
         self.dt = record.dt
@@ -210,6 +233,8 @@ class _Augmented:
         self.m = len(rows)
         self.n_in = self.b_in.shape[1]
         self.s = 2 * n + self.n_in
+        #: columns of the transition [Ad, B0(, B1)]: the state, the input at k (and at k + 1 for a linear input)
+        self.s_t = self.s + (self.n_in if intersample == "foh" else 0)
         mats = nm.matrices(full, position, names=_MATRICES)
         self._base = np.stack([mats[k] for k in _MATRICES])
         deriv = nm.matrix_derivatives(full, position, names=_MATRICES)
@@ -258,8 +283,29 @@ class _Augmented:
         self._y_template[r1, n: 2 * n] = self.s_out[r1] * (vs[None, :] / self.y_scale[r1, None])
         self._acc = self.s_out[r2] * (vs[None, :] / self.y_scale[r2, None])
 
+    def inputs(self, w: Array) -> Array:
+        """The transition's input rows (N, s_t - 2n) from the scaled inputs (N, n_in): ``w[k]``, and for a linear
+        input ``[w[k], w[k + 1]]`` (the last sample's next input repeats it; no step is taken from there)."""
+        if self.intersample != "foh":
+            return w
+        return np.hstack([w, np.vstack([w[1:], w[-1:]])])
+
+    def _hold(self, z: Array) -> Array:
+        """``[Ad, B0(, B1)]`` (B, 2n, s_t) from the scaled ``Z = [[A, B], [0, 0]] dt`` (B, s, s)."""
+        n2, s = 2 * self.n, self.s
+        if self.intersample != "foh":
+            return expm_batch(z)[:, :n2]
+        # the linear input: expm([[A dt, B dt, 0], [0, 0, I], [0, 0, 0]]) = [Ad, G1, G2] in its first block row,
+        # B0 = G1 - G2, B1 = G2 (hold_matrices)
+        big = np.zeros((z.shape[0], self.s_t, self.s_t))
+        big[:, :s, :s] = z
+        big[:, n2:s, s:] = np.eye(self.n_in)
+        e = expm_batch(big)[:, :n2]
+        e[:, :, n2:s] -= e[:, :, s:]
+        return e
+
     def discrete(self, theta: Array) -> tuple[Array, Array]:
-        """``[Ad, Bd]`` (B, 2n, 2n + n_in) and ``[C, D]`` (B, m, 2n + n_in), scaled, at theta rows (B, n_theta).
+        """``[Ad, B0(, B1)]`` (B, 2n, s_t) and ``[C, D(, 0)]`` (B, m, s_t), scaled, at theta rows (B, n_theta).
 
         The same matrices as :meth:`linearize` gives (without derivatives), with the fewest array operations:
         one batched solve for ``M^-1 [-K, -C, B]`` and one batched matrix exponential.
@@ -274,10 +320,11 @@ class _Augmented:
         block = np.linalg.solve(mats[:, 0], rhs) * self._block_scale
         z = np.broadcast_to(self._z_template, (batch, s, s)).copy()
         z[:, n: 2 * n] = block * self.dt
-        out = np.broadcast_to(self._y_template, (batch, self.m, s)).copy()
+        out = np.zeros((batch, self.m, self.s_t))
+        out[:, :, :s] = self._y_template
         if self._acc.size:
-            out[:, self.rows[2]] = self._acc @ block
-        return expm_batch(z)[:, : 2 * n], out
+            out[:, self.rows[2], :s] = self._acc @ block
+        return self._hold(z), out
 
     # -- continuous matrices ------------------------------------------------------------------------------------
     def _physical(self, theta: Array) -> tuple[Array, Array, Array, Array, Array]:
@@ -323,9 +370,9 @@ class _Augmented:
     def _state_scale(self, record: _Record) -> Array:
         """RMS of each state in a simulation at the start parameters (floored), for unit-scale states."""
         a, b, _, _ = self.continuous(self.space.to_internal(self.space.start)[None, :])
-        zoh = self.zoh(a, b)[0]
-        ad, bd = zoh[:, : 2 * self.n], zoh[:, 2 * self.n:]
-        forcing = (record.w / self.w_scale) @ bd.T
+        hold = self.transition(a, b)[0]
+        ad, bd = hold[:, : 2 * self.n], hold[:, 2 * self.n:]
+        forcing = self.inputs(record.w / self.w_scale) @ bd.T
         x = np.zeros(2 * self.n)
         acc = np.zeros(2 * self.n)
         for f in forcing:
@@ -343,14 +390,22 @@ class _Augmented:
         z[:, : 2 * self.n, 2 * self.n:] = b * self.dt
         return expm_batch(z)[:, : 2 * self.n]
 
+    def transition(self, a: Array, b: Array) -> Array:
+        """Exact ``[Ad, B0(, B1)]`` (B, 2n, s_t) of scaled continuous matrices for the record's input."""
+        z = np.zeros((a.shape[0], self.s, self.s))
+        z[:, : 2 * self.n, : 2 * self.n] = a * self.dt
+        z[:, : 2 * self.n, 2 * self.n:] = b * self.dt
+        return self._hold(z)
+
     # -- exact linearization (EKF) -------------------------------------------------------------------------------
     def linearize(self, theta: Array) -> tuple[Array, Array]:
-        """``W = [[Ad, Bd], [C, D]]`` (2n + m, 2n + n_in) at theta and ``dW/dtheta`` (n_theta, 2n + m, 2n + n_in).
+        """``W = [[Ad, B0(, B1)], [C, D(, 0)]]`` (2n + m, s_t) at theta and ``dW/dtheta`` (n_theta, 2n + m, s_t).
 
         ``d expm(Z)`` in direction ``E_j = dZ/dtheta_j`` is the upper right block of ``expm([[Z, E_j], [0, Z]])``
-        (Van Loan 1978), all directions in one batch.
+        (Van Loan 1978), all directions in one batch; for a linear input ``Z`` carries the identity block of
+        :meth:`_hold`, which does not depend on theta.
         """
-        n, nt, s = self.n, self.n_theta, self.s
+        n, nt, s = self.n, self.n_theta, self.s_t
         minv, a21, a22, minv_b, _ = self._physical(theta[None, :])
         a, b, c, d = self._assemble(a21, a22, minv_b)
         if self.affine:
@@ -370,20 +425,26 @@ class _Augmented:
         da, db, dcc, dd = self._assemble(da21, da22, dminv_b, derivative=True)
         big = np.zeros((nt, 2 * s, 2 * s))
         big[:, : 2 * n, : 2 * n] = a[0] * self.dt
-        big[:, : 2 * n, 2 * n: s] = b[0] * self.dt
+        big[:, : 2 * n, 2 * n: self.s] = b[0] * self.dt
         big[:, s: s + 2 * n, s: s + 2 * n] = a[0] * self.dt
-        big[:, s: s + 2 * n, s + 2 * n:] = b[0] * self.dt
+        big[:, s: s + 2 * n, s + 2 * n: s + self.s] = b[0] * self.dt
         big[:, : 2 * n, s: s + 2 * n] = da * self.dt
-        big[:, : 2 * n, s + 2 * n:] = db * self.dt
+        big[:, : 2 * n, s + 2 * n: s + self.s] = db * self.dt
+        if s > self.s:  # the linear input's identity block, in both diagonal copies
+            big[:, 2 * n: self.s, self.s: s] = np.eye(self.n_in)
+            big[:, s + 2 * n: s + self.s, s + self.s:] = np.eye(self.n_in)
         e = expm_batch(big)
         w0 = np.zeros((2 * n + self.m, s))
         w0[: 2 * n] = e[0, : 2 * n, :s]
         w0[2 * n:, : 2 * n] = c[0]
-        w0[2 * n:, 2 * n:] = d[0]
+        w0[2 * n:, 2 * n: self.s] = d[0]
         dw = np.zeros((nt, 2 * n + self.m, s))
         dw[:, : 2 * n] = e[:, : 2 * n, s:]
         dw[:, 2 * n:, : 2 * n] = dcc
-        dw[:, 2 * n:, 2 * n:] = dd
+        dw[:, 2 * n:, 2 * n: self.s] = dd
+        if s > self.s:  # [G1, G2] -> [B0, B1] = [G1 - G2, G2]
+            w0[: 2 * n, 2 * n: self.s] -= w0[: 2 * n, self.s:]
+            dw[:, : 2 * n, 2 * n: self.s] -= dw[:, : 2 * n, self.s:]
         return w0, dw
 
     def _hysteretic_derivative(self, theta: Array) -> Array:
@@ -457,6 +518,10 @@ class _KalmanEstimator(Estimator):
     """Shared settings, passes and result assembly of the EKF and the UKF."""
 
     _kind: ClassVar[str] = ""
+    #: The command line's intersample when none is given (a held input, as before FOH was added), and the
+    #: intersample behaviours the filters refuse, with the reason.
+    intersample_default: ClassVar[str] = "zoh"
+    intersample_refused: ClassVar[Mapping[str, str]] = {"bl": BAND_LIMITED_REFUSAL}
 
     def __init__(
         self,
@@ -477,6 +542,8 @@ class _KalmanEstimator(Estimator):
         tol: float = 1e-4,
         initial_state: str = "estimate",
         inflation: float = 4.0,
+        intersample: str = "zoh",
+        covariance: str = "auto",
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.inputs = inputs
@@ -489,8 +556,16 @@ class _KalmanEstimator(Estimator):
         self.tol = tol
         self.initial_state = initial_state
         self.inflation = inflation
+        self.intersample = intersample
+        self.covariance = covariance
 
     def _check_settings(self) -> None:
+        if self.covariance not in ("auto", "gauss-newton", "sandwich"):
+            msg = f"covariance must be 'auto', 'gauss-newton' or 'sandwich'; got {self.covariance!r}"
+            raise DataError(msg)
+        if check_intersample(self.intersample) == "bl":
+            msg = f"intersample 'bl' does not apply to the {self._kind} Kalman filter: {BAND_LIMITED_REFUSAL}"
+            raise DataError(msg)
         if isinstance(self.passes, bool) or not isinstance(self.passes, int) or self.passes < 1:
             msg = f"passes must be an integer >= 1; got {self.passes!r}"
             raise DataError(msg)
@@ -512,8 +587,8 @@ class _KalmanEstimator(Estimator):
         record = _select(model, data, self.inputs, self.outputs)
         given = _per_output(self.noise, record.outputs, "noise")
         walk = _per_unknown(self.random_walk, space, "random_walk")
-        aug = _Augmented(model, space, record, self.position)
-        w = record.w / aug.w_scale
+        aug = _Augmented(model, space, record, self.position, self.intersample)
+        w = aug.inputs(record.w / aug.w_scale)  # the transition's input rows
         y = record.y / aug.y_scale
         n_x = 2 * aug.n
         nt = space.n
@@ -559,8 +634,8 @@ class _KalmanEstimator(Estimator):
             if self.initial_state == "estimate":
                 x0, p_x = _initial_state(aug, theta, w, y, r_std)
             # the initial state is a nuisance parameter with the prior of the first pass
-            cov_u, info, newton = self._uncertainty(aug, result, theta, x0, p_first, w, y, r_std, prior_var, q_theta,
-                                                  constant)
+            cov_u, info, newton, errors = self._uncertainty(aug, result, theta, x0, p_first, w, y, r_std, prior_var,
+                                                            q_theta, constant)
             sigma = np.sqrt(np.maximum(np.diagonal(cov_u), 0.0))
             determined = _identifiability(info, prior_var, space.names)[0]
             # converged: every determined parameter moved by less than tol or a quarter of its standard error
@@ -571,8 +646,32 @@ class _KalmanEstimator(Estimator):
             p_theta = self.inflation * cov_u if constant else np.diag(prior_var)
             cap = np.sqrt(np.minimum(1.0, prior_var / np.maximum(np.diagonal(p_theta), 1e-300)))
             p_theta = p_theta * np.outer(cap, cap)
-        return self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
-                            prior_var, cov_u, info, newton, constant)
+        estimate = self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
+                                prior_var, cov_u, info, newton, constant)
+        if errors is None or not np.all(np.isfinite(estimate.values)):
+            return estimate
+        # the output errors at the estimate, tested as one-step's (MATLAB resid): a filter whose model of the
+        # inputs between samples (or of the structure) is wrong fails here instead of returning a confident number
+        jac, residual, regular = errors
+        n_samples = y.shape[0]
+        output_errors = residual.reshape(n_samples, aug.m) * r_std[None, :]
+        tested = with_residual_tests(estimate, [output_errors], [record.w], record.outputs, record.inputs)
+        analysis = tested.diagnostics.get("residual_analysis", {})
+        coloured = "white" in analysis and not all(analysis["white"].values())
+        if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
+            return tested
+        # the Newey-West sandwich around the regularized output-error information (its bread)
+        lag = newey_west_bandwidth([n_samples], analysis)
+        bread = np.linalg.inv(regular)
+        meat = newey_west_meat(jacobian=jac, residuals=residual, block=aug.m, records=[n_samples], max_lag=lag)
+        sandwich = _symmetric(bread @ meat @ bread)[: space.n, : space.n]
+        estimate = self._result(space, record, aug, passes, history, change, converged, given, r_std, q_theta,
+                                prior_var, sandwich, info, newton, constant)
+        diagnostics = dict(estimate.diagnostics)
+        diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
+                                     "gauss_newton_std": dict(zip(space.names, tested.std.tolist(), strict=True))}
+        return with_residual_tests(replace(estimate, diagnostics=diagnostics), [output_errors], [record.w],
+                                   record.outputs, record.inputs)
 
     @staticmethod
     def _uncertainty(
@@ -587,8 +686,9 @@ class _KalmanEstimator(Estimator):
         prior_var: Array,
         q_theta: Array,
         constant: bool,
-    ) -> tuple[Array, Array, Array]:
-        """Covariance of theta (internal), the information the data carry about it, and a Gauss-Newton step.
+    ) -> tuple[Array, Array, Array, tuple[Array, Array, Array] | None]:
+        """Covariance of theta (internal), the information the data carry about it, a Gauss-Newton step, and (for
+        constant parameters) the output errors' ``J``, ``r`` and the regularized information (for the sandwich).
 
         Constant parameters and a trusted model (no process noise): the output-error Fisher information at the
         estimate, with the initial state as a nuisance parameter (its prior as in the filter). This is what the
@@ -602,15 +702,16 @@ class _KalmanEstimator(Estimator):
         if not constant:
             prior_end = result.start_cov + np.diag(q_theta) * w.shape[0]
             info = _symmetric(np.linalg.inv(result.cov[:nt, :nt]) - np.linalg.inv(_symmetric(prior_end)))
-            return result.cov[:nt, :nt], info, np.full(nt, np.nan)
-        full, gradient = _output_error_information(aug, theta, x0, w, y, r_std)
+            return result.cov[:nt, :nt], info, np.full(nt, np.nan), None
+        full, gradient, jac, residual = _output_error_information(aug, theta, x0, w, y, r_std)
         a, b, d = full[:nt, :nt], full[:nt, nt:], full[nt:, nt:] + np.linalg.inv(p_x)
         info = _symmetric(a - b @ np.linalg.solve(d, b.T))
         regular = full.copy()
         regular[:nt, :nt] += np.diag(1.0 / prior_var)
         regular[nt:, nt:] += np.linalg.inv(p_x)
         newton = np.asarray(np.linalg.solve(_symmetric(regular), gradient)[:nt], dtype=float)
-        return _symmetric(np.linalg.inv(info + np.diag(1.0 / prior_var))), info, newton
+        return (_symmetric(np.linalg.inv(info + np.diag(1.0 / prior_var))), info, newton,
+                (jac, residual, _symmetric(regular)))
 
     @abstractmethod
     def _run(self, aug: _Augmented, z0: Array, p0: Array, q: Array, r: Array, w: Array, y: Array) -> _Pass:
@@ -704,6 +805,7 @@ class _KalmanEstimator(Estimator):
         traj_std = stds[keep] * space.value_jacobian(rows[keep])
         diagnostics: dict[str, Any] = {
             "filter": self._kind,
+            "intersample": self.intersample,
             "passes": len(passes),
             "pass_estimates": history,
             "converged": bool(converged),
@@ -745,15 +847,15 @@ def _initial_state(aug: _Augmented, theta: Array, w: Array, y: Array, r_std: Arr
     """
     n_x = 2 * aug.n
     a, b, c, d = aug.continuous(theta[None, :])
-    zoh = aug.zoh(a, b)[0]
-    ad, bd = zoh[:, :n_x], zoh[:, n_x:]
+    hold = aug.transition(a, b)[0]
+    ad, bd = hold[:, :n_x], hold[:, n_x:]
     count = min(y.shape[0], _X0_SAMPLES)
     forced = np.empty((count, aug.m))
     free = np.empty((count, aug.m, n_x))
     x = np.zeros(n_x)
     phi = np.eye(n_x)
     for k in range(count):
-        forced[k] = c[0] @ x + d[0] @ w[k]
+        forced[k] = c[0] @ x + d[0] @ w[k, : aug.n_in]
         free[k] = c[0] @ phi
         x = ad @ x + bd @ w[k]
         phi = ad @ phi
@@ -771,10 +873,12 @@ def _initial_state(aug: _Augmented, theta: Array, w: Array, y: Array, r_std: Arr
 
 def _output_error_information(
     aug: _Augmented, theta: Array, x0: Array, w: Array, y: Array, r_std: Array
-) -> tuple[Array, Array]:
-    """Fisher information about ``[theta, x0]`` of the outputs simulated at theta from x0, and ``J^T r``.
+) -> tuple[Array, Array, Array, Array]:
+    """Fisher information about ``[theta, x0]`` of the outputs simulated at theta from x0, ``J^T r``, and ``J``
+    (N m, n_theta + 2n, time-major) and ``r`` (N m) themselves.
 
     Sensitivities by the exact discrete recursion ``S[k+1] = Ad S[k] + dAd/dtheta x[k] + dBd/dtheta w[k]``
+    (``w`` the transition's input rows, :meth:`_Augmented.inputs`)
     (derivatives of the ZOH matrices from :meth:`_Augmented.linearize`) and ``dx[k]/dx0 = Ad^k``; ``r`` are the
     noise-weighted output errors ``(y - y_sim) / sigma``, so ``J^T r`` is the Gauss-Newton gradient.
     """
@@ -786,7 +890,7 @@ def _output_error_information(
     states[:, 1 + nt:] = np.eye(n_x)
     jac = np.empty((w.shape[0], m, nt + n_x))
     simulated = np.empty((w.shape[0], m))
-    xi = np.zeros(aug.s)
+    xi = np.zeros(aug.s_t)
     for k in range(w.shape[0]):
         xi[:n_x] = states[:, 0]
         xi[n_x:] = w[k]
@@ -800,7 +904,8 @@ def _output_error_information(
         states[:, 1:] = rest
     weighted = (jac / r_std[None, :, None]).reshape(-1, nt + n_x)
     residual = ((y - simulated) / r_std).ravel()
-    return np.asarray(weighted.T @ weighted, dtype=float), np.asarray(weighted.T @ residual, dtype=float)
+    return (np.asarray(weighted.T @ weighted, dtype=float), np.asarray(weighted.T @ residual, dtype=float),
+            np.asarray(weighted, dtype=float), np.asarray(residual, dtype=float))
 
 
 def _identifiability(
@@ -860,6 +965,15 @@ class ExtendedKalmanEstimator(_KalmanEstimator):
         Factor on the previous pass's covariance of the parameters for the start of the next (capped at the
         bounds' covariance). Larger values converge faster on informative data and are less robust on weakly
         informative data.
+    intersample : {"zoh", "foh"}
+        The inputs between samples (:mod:`cappe.systems.statespace`): held (default) or linear (what
+        :func:`scipy.signal.lsim` simulates; the nearer of the two to a band-limited DAQ record). ``"bl"`` is
+        refused with the reason (module notes): fit band-limited data with ``one-step``.
+    covariance : {"auto", "gauss-newton", "sandwich"}
+        Constant parameters: ``"gauss-newton"``, the inverse output-error information (right for white output
+        errors); ``"sandwich"``, the Newey-West covariance of output errors correlated in time around it
+        (:func:`cappe.estimate._uncertainty.newey_west_meat`, as one-step's); ``"auto"`` (default): the sandwich
+        where the output errors fail the whiteness test. Tracking: the filter's covariance.
 
     Notes
     -----
@@ -898,7 +1012,7 @@ class ExtendedKalmanEstimator(_KalmanEstimator):
         eye = np.eye(nt + n_x)
         f = np.eye(nt + n_x)
         h = np.zeros((m, nt + n_x))
-        xi = np.zeros(n_x + aug.n_in)
+        xi = np.zeros(aug.s_t)
         traj = np.empty((n_samples, nt))
         std = np.empty((n_samples, nt))
         nis = np.empty(n_samples)
@@ -929,7 +1043,7 @@ class ExtendedKalmanEstimator(_KalmanEstimator):
             std[k] = np.sqrt(np.diagonal(p)[:nt])
             if k == n_samples - 1:
                 break
-            # -- time update to k + 1 with the held input w[k]
+            # -- time update to k + 1 with the input rows w[k] (held: w[k]; linear: w[k] and w[k + 1])
             delta = z[:nt] - center
             if np.max(np.abs(delta)) > _RELINEARIZE:
                 center = z[:nt].copy()
@@ -953,7 +1067,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
 
     Same data, settings and result as :class:`ExtendedKalmanEstimator`, plus the sigma-point spread of the scaled
     unscented transform: ``alpha`` (spread, 0 < alpha <= 1), ``beta`` (2 is optimal for Gaussian priors) and
-    ``kappa``. Every sigma point is propagated through the exact ZOH transition at its own parameters; no
+    ``kappa``. Every sigma point is propagated through the exact transition (ZOH or FOH) at its own parameters; no
     Jacobians are used.
 
     Parameters
@@ -961,6 +1075,8 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
     model, unknowns, bounds, start, values, rng
         See :class:`Estimator`.
     inputs, outputs, position, noise, process_noise, random_walk, passes, tol, initial_state, inflation
+        As for :class:`ExtendedKalmanEstimator`.
+    intersample, covariance
         As for :class:`ExtendedKalmanEstimator`.
     alpha : float
         Spread of the sigma points around the mean, 0 < alpha <= 1 (dimensionless).
@@ -1003,6 +1119,8 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         tol: float = 1e-4,
         initial_state: str = "estimate",
         inflation: float = 4.0,
+        intersample: str = "zoh",
+        covariance: str = "auto",
         alpha: float = 1.0,
         beta: float = 2.0,
         kappa: float = 0.0,
@@ -1010,7 +1128,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng, inputs=inputs,
                          outputs=outputs, position=position, noise=noise, process_noise=process_noise,
                          random_walk=random_walk, passes=passes, tol=tol, initial_state=initial_state,
-                         inflation=inflation)
+                         inflation=inflation, intersample=intersample, covariance=covariance)
         self.alpha = alpha
         self.beta = beta
         self.kappa = kappa
@@ -1049,7 +1167,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         # before the propagation, so that the parameters' random walk widens the points the update sees)
         sig = _sigma_points(z, p, spread)
         _, out = aug.discrete(sig[distinct, :nt])
-        xi = np.zeros((2 * dim + 1, aug.s))
+        xi = np.zeros((2 * dim + 1, aug.s_t))
         for k in range(n_samples):
             # -- measurement update with y[k]
             z = wm @ sig
@@ -1075,7 +1193,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
             std[k] = np.sqrt(np.maximum(np.diagonal(p)[:nt], 0.0))
             if k == n_samples - 1:
                 break
-            # -- time update: exact ZOH of every sigma point at its own parameters
+            # -- time update: exact transition of every sigma point at its own parameters
             sig = _sigma_points(z, p + q, spread)
             phi, out = aug.discrete(sig[distinct, :nt])
             xi[:, :n_x] = sig[:, nt:]

@@ -61,14 +61,19 @@ from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, Fitted, honest_intervals, least_squares_fit, with_residual_tests
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
-from cappe.estimate._uncertainty import correlated_uncertainty, jacobian_uncertainty, null_direction_text
+from cappe.estimate._uncertainty import (
+    correlated_uncertainty,
+    jacobian_uncertainty,
+    newey_west_bandwidth,
+    null_direction_text,
+)
 from cappe.exceptions import DataError, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.model.numeric import ParamsLike
 from cappe.systems.dynamic_stiffness import frf_lines
 from cappe.systems.frf import FRFData
 from cappe.systems.mechanical import DERIVATIVE_ORDER
-from cappe.systems.statespace import band_limited_response, check_intersample, hold_weights
+from cappe.systems.statespace import band_limited_modal_response, check_intersample, hold_weights
 from cappe.systems.timedata import TimeData
 
 __all__ = ["FRFDerivatives", "OneStepEstimator", "OneStepFRFEstimator", "frf_derivatives"]
@@ -307,22 +312,11 @@ class _TimeModel:
 
     def _band_limited(self, modes: _Modes, u: Array, delay: float) -> Array:
         """Outputs for a band-limited input delayed by ``delay`` samples (exact: the delay is a linear phase)."""
-        lam, res = modes.lam, modes.cm[:, :, None] * modes.bm[None, :, :]  # (n_out, m, n_in), weights included
-        tau = delay * self.dt
-        if lam.size and np.any(lam.real >= 0):
+        if modes.lam.size and np.any(modes.lam.real >= 0):
             msg = "the model has an undamped or unstable mode; a band-limited simulation needs every mode to decay"
             raise ModelError(msg)
-
-        def transfer(omega: Array) -> CArray:
-            jw = 1j * omega[:, None]
-            # each kept mode stands for itself and its conjugate (weight 2 in cm) or is real (weight 1):
-            # 0.5 (r / (jw - lam) + conj(r) / (jw - conj(lam))) covers both
-            h = 0.5 * (np.einsum("oml,fm->fol", res, 1.0 / (jw - lam[None, :]))
-                       + np.einsum("oml,fm->fol", res.conj(), 1.0 / (jw - lam.conj()[None, :])))
-            return np.asarray((h + modes.d[None]) * np.exp(-1j * omega * tau)[:, None, None])
-
-        decay = float(np.min(-lam.real)) if lam.size else 1.0 / self.dt
-        return band_limited_response(transfer, u, self.dt, decay)
+        # each kept mode stands for itself and its conjugate (weight 2 in cm) or is real (weight 1)
+        return band_limited_modal_response(modes.lam, modes.bm, modes.cm, modes.d, u, self.dt, delay=delay)
 
     def segments(self, modes: _Modes, u: Array, delay: float, sigma: float, length: int) -> tuple[Array, Array]:
         """Exponentially weighted zero-state responses of consecutive segments (n_seg, length, n_out), and the
@@ -368,14 +362,7 @@ def _sandwich(result: ParameterEstimate, space: ParameterSpace, jacobian: Array,
 
     The bandwidth is twice the lag beyond which every output's residual autocorrelation stays inside its 99 %
     bound (at least the Newey-West rule ``4 (N / 100)^(2/9)``, at most N / 10 or 500 samples)."""
-    n = min(records)
-    rule = int(np.floor(4 * (sum(records) / 100) ** (2 / 9)))
-    inside = rule
-    if "autocorrelation" in analysis:
-        acf = np.abs(np.asarray(analysis["autocorrelation"], dtype=float))[:, 1:]
-        outside = np.flatnonzero(np.any(acf > float(analysis["auto_bound"]), axis=0))
-        inside = int(outside.max()) + 2 if outside.size else 0
-    lag = int(min(max(rule, 2 * inside), n // 10, 500))
+    lag = newey_west_bandwidth(records, analysis)
     base = jacobian_uncertainty(names=space.names, values=result.values, jacobian=jacobian, residuals=residuals)
     hac = correlated_uncertainty(base, jacobian=jacobian, residuals=residuals, block=n_out, records=records,
                                  max_lag=lag)

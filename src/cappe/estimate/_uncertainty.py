@@ -18,7 +18,8 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 from scipy import stats
 
-__all__ = ["LocalUncertainty", "correlated_uncertainty", "jacobian_uncertainty"]
+__all__ = ["LocalUncertainty", "correlated_uncertainty", "jacobian_uncertainty", "newey_west_bandwidth",
+           "newey_west_meat"]
 
 Array = NDArray[np.float64]
 
@@ -225,16 +226,7 @@ def correlated_uncertainty(
     n_obs, n_p = jac.shape
     s2 = float(r @ r) / unc.dof
     p_inv = unc.covariance / s2 if s2 > 0 else np.zeros((n_p, n_p))
-    g_all = np.einsum("tbp,tb->tp", jac.reshape(-1, block, n_p), r.reshape(-1, block))
-    meat = np.zeros((n_p, n_p))
-    start = 0
-    for steps in records:
-        g = g_all[start: start + steps]
-        start += steps
-        meat += g.T @ g
-        for lag in range(1, min(int(max_lag), steps - 1) + 1):
-            gamma = g[lag:].T @ g[:-lag]
-            meat += (1.0 - lag / (max_lag + 1.0)) * (gamma + gamma.T)
+    meat = newey_west_meat(jacobian=jac, residuals=r, block=block, records=records, max_lag=max_lag)
     meat *= n_obs / max(n_obs - n_p, 1)
     cov = p_inv @ meat @ p_inv
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
@@ -247,3 +239,85 @@ def correlated_uncertainty(
     ci95 = np.column_stack([unc.values - t * std, unc.values + t * std])
     return LocalUncertainty(unc.names, unc.values, cov, std, ci95, corr, unc.identifiable, unc.rank,
                             unc.condition_number, unc.singular_values, unc.combinations, unc.dof)
+
+
+def newey_west_meat(
+    *, jacobian: ArrayLike, residuals: ArrayLike, block: int, records: Sequence[int], max_lag: int
+) -> Array:
+    """The Newey-West estimate ``S = sum_|l|<=L (1 - |l| / (L + 1)) sum_t g_t g_{t-l}^T`` of the scores' covariance.
+
+    ``g_t = J_t^T r_t`` is the contribution of time step ``t`` (``block`` residuals) to the gradient; the sums stay
+    within each record. The sandwich covariance of a least-squares or likelihood fit is ``B^-1 S B^-1`` with its
+    bread ``B`` (``J^T J``, or the regularized information of a filter).
+
+    Parameters
+    ----------
+    jacobian : array_like, shape (n_obs, n_p)
+        ``d r / d p``, rows ordered time-major: ``block`` rows per time step.
+    residuals : array_like, shape (n_obs,)
+        Residuals in the same order.
+    block : int
+        Residuals per time step.
+    records : sequence of int
+        Time steps of each record, in order.
+    max_lag : int
+        Bandwidth ``L`` in time steps (>= 0).
+
+    Returns
+    -------
+    ndarray, shape (n_p, n_p)
+        ``S``.
+
+    Examples
+    --------
+    >>> j, r = np.ones((4, 1)), np.array([1.0, -1.0, 1.0, -1.0])
+    >>> float(newey_west_meat(jacobian=j, residuals=r, block=1, records=[4], max_lag=0)[0, 0])  # sum of r^2
+    4.0
+    """
+    jac = np.atleast_2d(np.asarray(jacobian, dtype=float))
+    r = np.asarray(residuals, dtype=float).ravel()
+    n_p = jac.shape[1]
+    g_all = np.einsum("tbp,tb->tp", jac.reshape(-1, block, n_p), r.reshape(-1, block))
+    meat = np.zeros((n_p, n_p))
+    start = 0
+    for steps in records:
+        g = g_all[start: start + steps]
+        start += steps
+        meat += g.T @ g
+        for lag in range(1, min(int(max_lag), steps - 1) + 1):
+            gamma = g[lag:].T @ g[:-lag]
+            meat += (1.0 - lag / (max_lag + 1.0)) * (gamma + gamma.T)
+    return meat
+
+
+def newey_west_bandwidth(records: Sequence[int], analysis: Any) -> int:
+    """Bandwidth of :func:`newey_west_meat` from a residual analysis (``ResidualAnalysis.to_dict()``).
+
+    Twice the lag beyond which every output's residual autocorrelation stays inside its 99 % bound, at least the
+    Newey-West rule ``4 (N / 100)^(2/9)`` and at most N / 10 (N the shortest record) or 500 time steps.
+
+    Parameters
+    ----------
+    records : sequence of int
+        Time steps of each record.
+    analysis : mapping
+        The residual analysis (its ``autocorrelation`` and ``auto_bound``); without them the rule alone.
+
+    Returns
+    -------
+    int
+        The bandwidth in time steps.
+
+    Examples
+    --------
+    >>> newey_west_bandwidth([6000], {})  # twice the rule's 9 where no autocorrelation is given
+    18
+    """
+    n = min(records)
+    rule = int(np.floor(4 * (sum(records) / 100) ** (2 / 9)))
+    inside = rule
+    if "autocorrelation" in analysis:
+        acf = np.abs(np.asarray(analysis["autocorrelation"], dtype=float))[:, 1:]
+        outside = np.flatnonzero(np.any(acf > float(analysis["auto_bound"]), axis=0))
+        inside = int(outside.max()) + 2 if outside.size else 0
+    return int(min(max(rule, 2 * inside), n // 10, 500))
