@@ -199,14 +199,13 @@ def run(args: argparse.Namespace) -> int:
         overlay = (pair[0], pair[1])
     estimator = AutomatedIdentification(
         NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
-        n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
-        n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args),
-        overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, shapes=args.shapes,
-        progress=progress,
+        n_opt=args.n_opt, threshold=args.threshold, validation=validation, n_permutations=args.permutations,
+        exact=not args.first_order, noise=_noise(args), n_workers=args.workers,
+        executor=args.scheduler or args.executor, shapes=args.shapes,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        estimator.fit(reference)
+        estimator.fit(reference, truth=truth, overlay=overlay, progress=progress)
     for line in notes:
         print(f"cappe: {line}", file=sys.stderr)
     for w in caught:
