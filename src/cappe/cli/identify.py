@@ -246,10 +246,10 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
              f"validation position: {_where(result.validation_position, 'none held out')}"]
     lines += _parameter_rows(estimate, truth)
     lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
-    diag = estimate.diagnostics
-    if "uncertainty" in diag:
-        lines.append(f"uncertainty: {diag['uncertainty']['std']}; 95 % intervals on a log scale; residuals "
-                     f"weighted by {diag.get('weighting', 'the weights')}, {diag.get('shapes', 'complex')} shapes")
+    joint = result.joint
+    if joint.uncertainty is not None:
+        lines.append(f"uncertainty: {joint.uncertainty}; 95 % intervals on a log scale; residuals "
+                     f"weighted by {joint.weighting or 'the weights'}, {joint.shapes or 'complex'} shapes")
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())

@@ -231,7 +231,7 @@ class AutomatedIdentification(Estimator):
             self._deprecated_run = _deprecated_run_options(deprecated, "AutomatedIdentification(...)")
 
     # -- checks -------------------------------------------------------------------------------------------------
-    def _settings(self, run: RunOptions) -> AutomatedSettings:
+    def _settings(self, run: _RunOptions) -> AutomatedSettings:
         """The validated settings, with the run's ``truth`` and ``overlay``."""
         for setting, value, low in (("n_gsa", self.n_gsa, 2), ("n_opt", self.n_opt, 1),
                                     ("max_iterations", self.max_iterations, 1),
@@ -331,7 +331,7 @@ class AutomatedIdentification(Estimator):
         ModelError
             The settings, unknowns, bounds or ``truth`` break a rule of the model or the method.
         """
-        given = RunOptions(truth=truth, overlay=overlay, progress=progress)
+        given = _RunOptions(truth=truth, overlay=overlay, progress=progress)
         self._run = given.over(getattr(self, "_deprecated_run", None))
         try:
             super().fit(data)
@@ -352,9 +352,9 @@ class AutomatedIdentification(Estimator):
         -------
         self
         """
-        moved = {name: params.pop(name) for name in RunOptions.names() if name in params}
+        moved = {name: params.pop(name) for name in _RunOptions.names() if name in params}
         if moved:
-            earlier = getattr(self, "_deprecated_run", RunOptions())
+            earlier = getattr(self, "_deprecated_run", _RunOptions())
             self._deprecated_run = _deprecated_run_options(moved, "set_params(...)").over(earlier)
         return super().set_params(**params)
 
@@ -425,7 +425,7 @@ class AutomatedIdentification(Estimator):
 
 
 @dataclass(frozen=True)
-class RunOptions:
+class _RunOptions:
     """What one :meth:`AutomatedIdentification.fit` validates against and shows (not settings of the estimate).
 
     Attributes
@@ -444,16 +444,16 @@ class RunOptions:
 
     @staticmethod
     def names() -> tuple[str, ...]:
-        return tuple(f.name for f in fields(RunOptions))
+        return tuple(f.name for f in fields(_RunOptions))
 
-    def over(self, defaults: RunOptions | None) -> RunOptions:
+    def over(self, defaults: _RunOptions | None) -> _RunOptions:
         """These options, each one not given (None) taken from ``defaults``."""
         if defaults is None:
             return self
-        return RunOptions(**{n: getattr(defaults, n) if getattr(self, n) is None else getattr(self, n)
+        return _RunOptions(**{n: getattr(defaults, n) if getattr(self, n) is None else getattr(self, n)
                              for n in self.names()})
 
-    def checked(self, model: NumericModel, data: ModalData) -> RunOptions:
+    def checked(self, model: NumericModel, data: ModalData) -> _RunOptions:
         """The options checked against the model and the reference before the pipeline runs (an unknown truth
         name or overlay channel was found only by the validation step, after the whole identification)."""
         if self.truth is not None:
@@ -467,16 +467,16 @@ class RunOptions:
         return self
 
 
-def _deprecated_run_options(given: Mapping[str, Any], where: str) -> RunOptions:
+def _deprecated_run_options(given: Mapping[str, Any], where: str) -> _RunOptions:
     """The run options given as settings (deprecated), with one warning naming them; others are a TypeError."""
-    unknown = sorted(set(given) - set(RunOptions.names()))
+    unknown = sorted(set(given) - set(_RunOptions.names()))
     if unknown:
         msg = f"AutomatedIdentification got unexpected keyword argument(s) {unknown}"
         raise TypeError(msg)
     named = ", ".join(f"{n}=" for n in given)
     warnings.warn(f"{where} with {named} is deprecated and stops working in cappe 0.2: pass "
                   f"{named.replace('=', '=...')} to fit(reference, ...) instead", DeprecationWarning, stacklevel=3)
-    return RunOptions(**given)
+    return _RunOptions(**given)
 
 
 def _check_set(model: NumericModel, where: str, data_set: ModalDataSet) -> None:
