@@ -48,9 +48,9 @@ def run_case(machine: NumericModel, case: str, seed: int) -> dict[str, Any]:
     reference = reference_modes(machine, params=structure.resolve_parameters({**truth, **disturbed}), positions="all",
                                 n_modes=20, rng=seed + 1000, **noise)
     t0 = time.perf_counter()
-    estimator = AutomatedIdentification(machine, validation=HELD_OUT, truth=truth, rng=seed, n_permutations=0,
+    estimator = AutomatedIdentification(machine, validation=HELD_OUT, rng=seed, n_permutations=0,
                                         noise=NOISE if case == "noisy" else None, **SETTINGS)
-    result = estimator.fit(reference).estimate_
+    result = estimator.fit(reference, truth=truth).estimate_
     seconds = time.perf_counter() - t0
     kinds = {n: structure.parameter(n).kind for n in result.names}
     errors = result.relative_error(truth)

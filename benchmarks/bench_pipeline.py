@@ -91,8 +91,8 @@ def child() -> dict[str, Any]:
     counter.clear()  # the reference is the user's data, not the identification's work
     samples.clear()
     t1 = time.perf_counter()
-    estimator = AutomatedIdentification(machine, validation={"z": -0.294}, truth=truth, rng=1, **SETTINGS)
-    result = estimator.fit(reference).estimate_
+    estimator = AutomatedIdentification(machine, validation={"z": -0.294}, rng=1, **SETTINGS)
+    result = estimator.fit(reference, truth=truth).estimate_
     fit_s = time.perf_counter() - t1
     errors = result.relative_error(truth)
     return {

@@ -103,6 +103,22 @@ def test_identify_names_sensors_that_do_not_fit(files, capsys):
     assert "reference sensors ['nose:x'] are not sensor channels of model 'bench-slide'" in capsys.readouterr().err
 
 
+def test_identify_names_a_bad_overlay_before_the_identification(files, capsys, monkeypatch):
+    # the overlay channels were checked by the validation step, after the whole identification (28 s on the
+    # machine tool at --n-gsa 64); the error now comes first
+    import cappe.estimate._automated as automated
+
+    def pipeline_ran(*_args, **_kwargs):
+        msg = "the pipeline ran"
+        raise AssertionError(msg)
+
+    monkeypatch.setattr(automated, "run_pipeline", pipeline_ran)
+    code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--overlay", "nose:x,bed1:y"])
+    assert code == 1
+    assert "overlay ('nose:x', 'bed1:y') must be (output, input): two reference sensor channels" in (
+        capsys.readouterr().err)
+
+
 def test_identify_names_modes_and_positions_that_do_not_fit(files, capsys):
     code = cli(["identify", str(files["model"]), "--reference", str(files["many"]), "--n-gsa", "8"])
     assert code == 1

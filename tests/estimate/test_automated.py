@@ -63,8 +63,8 @@ def ideal(bench):
     """The pipeline on an exact-mode reference simulated from a random truth, no noise (the issue's ideal case)."""
     truth = random_truth(bench, 3)
     reference = ModalEngine(bench).modal_data(POSITIONS, params=truth)  # exact complex modes
-    est = AutomatedIdentification(bench, n_gsa=64, n_opt=8, rng=1, validation={"z": -0.2}, truth=truth,
-                                  n_permutations=2, n_workers=2).fit(reference)
+    est = AutomatedIdentification(bench, n_gsa=64, n_opt=8, rng=1, validation={"z": -0.2},
+                                  n_permutations=2, n_workers=2).fit(reference, truth=truth)
     return est, truth, reference
 
 
@@ -159,6 +159,11 @@ def test_typed_result_is_the_document_it_writes(ideal, tmp_path):
     assert result.validation.held is est.validation_["validation"]
     assert len(result.validation.assignments) == len(result.validation.permuted) == 2
     assert result.joint.cost_function is est.cost_function_
+    # what the printed summary says of the uncertainty: typed fields, the same as the document's entries
+    assert (result.joint.uncertainty, result.joint.weighting, result.joint.shapes) == (
+        diag["uncertainty"]["std"], diag["weighting"], diag["shapes"]) == (
+        "larger of model-based and cluster-robust sandwich over 36 mode-position pairs",
+        "the residuals' own scatter per mode", "real")
     assert list(result.timings) == ["gsa", "stiffness_subproblems", "stiffness_refinement", "damping_least_squares",
                                     "joint_refinement", "validation", "total"]
     # the report reads the typed result; a bare estimate with the validation mapping still gives its sections
@@ -465,6 +470,58 @@ def test_use_before_fit(bench):
 
     with pytest.raises(NotFittedError, match="AutomatedIdentification is not fitted yet"):
         _ = AutomatedIdentification(bench).estimate_
+
+
+def test_run_options_are_fit_arguments_and_the_old_settings_still_work(bench, small_reference):
+    # truth, overlay and progress were constructor settings; they are what one run validates against and shows,
+    # so they are arguments of fit now, and the old keywords keep working one release with a DeprecationWarning
+    truth = bench.structure.resolve_parameters({})
+    options = {"unknowns": ["me_kx", "me_kz"], "n_gsa": 8, "n_opt": 2, "n_permutations": 0, "n_workers": 1,
+               "rng": 0, "exact": False}
+    assert not {"truth", "overlay", "progress"} & set(AutomatedIdentification(bench).get_params())
+    new = AutomatedIdentification(bench, **options).fit(small_reference, truth=truth, overlay=("bed2:z", "bed1:y"))
+    with pytest.warns(DeprecationWarning, match=r"AutomatedIdentification\(\.\.\.\) with truth=, overlay= is "
+                                                r"deprecated .* pass truth=\.\.\., overlay=\.\.\. to fit"):
+        old = AutomatedIdentification(bench, truth=truth, overlay=("bed2:z", "bed1:y"), **options)
+    old.fit(small_reference)
+    for est in (new, old):
+        first = est.result_.validation.identification[0]
+        assert first.frf_source == "truth"
+        assert (first.overlay["output"], first.overlay["input"]) == ("bed2:z", "bed1:y")
+    assert _untimed(old.result_.to_dict()) == _untimed(new.result_.to_dict())
+    np.testing.assert_array_equal(old.estimate_.values, new.estimate_.values)
+    # a fit argument wins over the deprecated default, and set_params takes the old names with the same warning
+    assert old.fit(small_reference, overlay=("bed1:x", "bed1:x")).result_.validation.identification[0].overlay[
+        "output"] == "bed1:x"
+    with pytest.warns(DeprecationWarning, match=r"set_params\(\.\.\.\) with progress= is deprecated"):
+        assert new.set_params(progress=False, n_opt=3) is new
+    assert new.get_params()["n_opt"] == 3
+    with pytest.raises(TypeError, match=r"unexpected keyword argument\(s\) \['colour'\]"):
+        AutomatedIdentification(bench, colour="red")
+
+
+def _untimed(doc):
+    """A result document without its run times (``timings``, ``seconds``), the only entries that vary run to run."""
+    if isinstance(doc, dict):
+        return {k: _untimed(v) for k, v in doc.items() if k not in ("timings", "seconds")}
+    if isinstance(doc, list):
+        return [_untimed(v) for v in doc]
+    return doc
+
+
+def test_bad_run_options_fail_before_the_pipeline(bench, small_reference, monkeypatch):
+    # an unknown overlay channel was found by the validation step, after the whole identification had run
+    import cappe.estimate._automated as automated
+
+    def pipeline_ran(*_args, **_kwargs):
+        msg = "the pipeline ran"
+        raise AssertionError(msg)
+
+    monkeypatch.setattr(automated, "run_pipeline", pipeline_ran)
+    with pytest.raises(DataError, match=r"overlay \('spindle:q', 'bed1:y'\) must be \(output, input\): two reference"):
+        AutomatedIdentification(bench).fit(small_reference, overlay=("spindle:q", "bed1:y"))
+    with pytest.raises(ModelError, match="kz_tool"):
+        AutomatedIdentification(bench).fit(small_reference, truth={"kz_tool": 1.0})
 
 
 def test_no_damping_unknowns_and_no_hold_out(bench, small_reference):

@@ -107,7 +107,9 @@ def learned(estimator: Any) -> dict[str, Any]:
 
 
 def setting_names(cls: type) -> list[str]:
-    return [p.name for p in list(inspect.signature(cls.__init__).parameters.values())[1:]]
+    # a ``**deprecated`` catch-all (AutomatedIdentification's old run options) is not a setting
+    return [p.name for p in list(inspect.signature(cls.__init__).parameters.values())[1:]
+            if p.kind not in (inspect.Parameter.VAR_POSITIONAL, inspect.Parameter.VAR_KEYWORD)]
 
 
 def test_every_registered_method_and_black_box_model_is_checked():

@@ -33,9 +33,9 @@ def _identify(machine: NumericModel, seed: int, disturb: bool) -> tuple[Automate
     wrong = structure.disturbed(0.1, rng) if disturb else {}
     reference = reference_modes(machine, params=structure.resolve_parameters({**truth, **wrong}), positions="all",
                                 n_modes=20)
-    est = AutomatedIdentification(machine, n_gsa=256, n_opt=20, validation={"z": -0.294}, truth=truth, rng=seed,
+    est = AutomatedIdentification(machine, n_gsa=256, n_opt=20, validation={"z": -0.294}, rng=seed,
                                   n_permutations=0)
-    return est.fit(reference), truth
+    return est.fit(reference, truth=truth), truth
 
 
 def test_ideal_case_all_stiffness_within_1_and_damping_within_5_percent(machine):

@@ -301,6 +301,12 @@ def test_bad_files_and_nodes_are_one_line_errors(tmp_path: Path) -> None:
         b.element("e", bodies=["ground", "beam"], at=[0.5, 0, 0], stiffness={"x": 1.0})
     with pytest.raises(ModelError, match=r"flexible body 'beam' has no node 'n99'"):
         b.sensor("s", body="beam", point="n99")
+    # rigid and flexible bodies share one name space, and 'ground' names neither
+    with pytest.raises(ModelError, match=r"'ground' is reserved .* \(m.yaml, flexible_bodies\[1\]\)"):
+        b.flexible_body("ground", mass=m, stiffness=k, nodes=_node_entries(nodes))
+    with pytest.raises(ModelError, match=r"duplicate body name 'beam' \(m.yaml, bodies\[0\]\); first defined at "
+                                         r"m.yaml, flexible_bodies\[0\]"):
+        b.body("beam", mass=1.0)
 
 
 def test_a_node_without_the_dof_an_element_needs_is_an_error() -> None:

@@ -167,6 +167,18 @@ def test_ground_is_reserved_and_elements_need_two_bodies():
         b.element("e", bodies=("a", "a"), stiffness={"x": 1})
 
 
+def test_name_errors_call_a_body_a_body_and_an_axis_an_axis(two_mass):
+    # the messages took the group name minus its last letter: "duplicate bodie name", "no bodie named", "axe name"
+    b = StructureBuilder("x", source="x.yaml")
+    b.body("a", mass=1.0, dofs=["x"])
+    with pytest.raises(ModelError, match=r"^duplicate body name 'a' \(x.yaml, bodies\[1\]\); first defined at "):
+        b.body("a", mass=1.0, dofs=["x"])
+    with pytest.raises(ModelError, match=r"^axis name must be an identifier \(letters, digits, _\); got '1z'"):
+        b.axis("1z", [0.0])
+    with pytest.raises(ModelError, match=r"^model 'two-mass-rig' has no body named 'm3'; known: "):
+        two_mass.body("m3")
+
+
 def test_unknown_parameter_override_is_an_error(two_mass):
     with pytest.raises(ModelError, match=r"unknown parameter 'm3' for model 'two-mass-rig'"):
         NumericModel(two_mass).vector({"m3": 1.0})

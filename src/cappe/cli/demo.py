@@ -99,8 +99,8 @@ def _identification(args: argparse.Namespace, data: dict[str, object]) -> list[s
     reference = reference_modes(machine, params=machine.structure.resolve_parameters(truth), positions="all",
                                 n_modes=20)
     estimator = AutomatedIdentification(machine, n_gsa=args.n_gsa, n_opt=args.n_opt, validation={"z": -0.294},
-                                        truth=truth, rng=args.seed)
-    estimator.fit(reference)
+                                        rng=args.seed)
+    estimator.fit(reference, truth=truth)
     identified = estimator.result_
     write_html_report(args.report, result=identified, truth=truth,
                       title="uniaxial machine tool: automated identification (ideal case)", model=machine,

@@ -254,14 +254,13 @@ def run(args: argparse.Namespace) -> int:
         overlay = (pair[0], pair[1])
     estimator = AutomatedIdentification(
         NumericModel(structure), names(args.unknowns), values=values or None, rng=args.seed, n_gsa=args.n_gsa,
-        n_opt=args.n_opt, threshold=args.threshold, validation=validation, truth=truth,
-        n_permutations=args.permutations, exact=not args.first_order, noise=_noise(args),
-        overlay=overlay, n_workers=args.workers, executor=args.scheduler or args.executor, shapes=args.shapes,
-        progress=progress, frf=measured or None,
+        n_opt=args.n_opt, threshold=args.threshold, validation=validation, n_permutations=args.permutations,
+        exact=not args.first_order, noise=_noise(args), n_workers=args.workers,
+        executor=args.scheduler or args.executor, shapes=args.shapes, frf=measured or None,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        estimator.fit(reference)
+        estimator.fit(reference, truth=truth, overlay=overlay, progress=progress)
     for line in notes:
         print(f"cappe: {line}", file=sys.stderr)
     for w in caught:
@@ -302,7 +301,6 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
              f"validation position: {_where(result.validation_position, 'none held out')}"]
     lines += _parameter_rows(estimate, truth)
     lines.append("costs: " + ", ".join(f"{k} {v:.4g}" for k, v in result.costs.items() if v is not None))
-    diag = estimate.diagnostics
     frf = result.frf
     if frf is not None:
         lines.append(f"refined against measured FRFs at {_where_all(p['position'] for p in frf.positions)}: "
@@ -310,11 +308,13 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
                      f"{', '.join(str(p['lines']) for p in frf.positions)} lines, weighted by {frf.noise}")
         lines.append(f"  FRF residual / data noise: chi2/dof {frf.chi2_dof:.3g} (1: a fit down to the noise); "
                      f"cost {frf.cost_before:.4g} at the modal estimate -> {frf.cost_after:.4g}")
-    if "uncertainty" in diag:
-        weighted = ("FRF residuals weighted by the data's own noise" if frf is not None else
-                    f"residuals weighted by {diag.get('weighting', 'the weights')}, "
-                    f"{diag.get('shapes', 'complex')} shapes")
-        lines.append(f"uncertainty: {diag['uncertainty']['std']}; 95 % intervals on a log scale; {weighted}")
+    joint = result.joint
+    if frf is not None:
+        lines.append(f"uncertainty: {frf.uncertainty}; 95 % intervals on a log scale; FRF residuals weighted by the "
+                     "data's own noise")
+    elif joint.uncertainty is not None:
+        lines.append(f"uncertainty: {joint.uncertainty}; 95 % intervals on a log scale; residuals "
+                     f"weighted by {joint.weighting or 'the weights'}, {joint.shapes or 'complex'} shapes")
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())

@@ -61,8 +61,10 @@ stages 2 and 3 is in ``_subproblems`` and ``_damping_least_squares``, the exact-
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
-from typing import Any, ClassVar
+from dataclasses import dataclass, fields
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
@@ -119,8 +121,6 @@ class AutomatedIdentification(Estimator):
         Starts of the joint stiffness refinement: the paper's selection, the consensus of all subproblems
         (each unknown's median over the subproblems that determine it) and the selections by 2nd, 3rd ... least
         spread; the lowest final cost wins. A single start can be trapped where modes cross between positions.
-    truth : mapping, optional
-        True parameters of a simulated reference: the validation step's FRFs then come from the model at the truth.
     n_permutations : int
         Random reassignments of the damping factors in the validation step's permuted-damping comparison (0: none).
     exact : bool
@@ -141,21 +141,20 @@ class AutomatedIdentification(Estimator):
         ``benchmarks/bench_real_chain.py`` (3 truths, same extracted modes and start): worst stiffness error
         2.2 / 3.6 / 2.1 % realized against 2.2 / 2.2 / 20.7 % complex, worst damping error 43 / 40 / 64 % against
         30 / 6 / 27 % (issue 20).
-    overlay : (str, str), optional
-        Output and input channel of the FRF the validation step keeps for overlays (default: the driving point with
-        the largest peak).
     n_workers : int, optional
         Threads for the GSA and the subproblems (default one per core).
     executor : Executor, str or None
         Where the GSA's model evaluations and the subproblems run instead: ``"serial"``, ``"threads"``,
         ``"processes"`` or a Dask scheduler address (see :class:`cappe.parallel.Executor`). The result is the
         same for every choice.
-    progress : bool
-        Progress bars (tqdm, stderr) per stage.
     frf : sequence of MeasuredFRF, optional
         Measured FRFs at reference positions (at model sensor channels). At identification positions, all unknowns
         are refined against them after the modal stages (:mod:`cappe.estimate._frf_refinement`); at the held-out
         position, the validation's FRAC and CSF compare the model with them (without ``truth``).
+    **deprecated
+        ``truth``, ``overlay`` and ``progress``: arguments of :meth:`fit` since cappe 0.1 (they do not shape the
+        estimate; they say what one run validates against, which FRF it keeps and whether it shows progress).
+        Given here they still work until cappe 0.2, with a :class:`DeprecationWarning`, as defaults of :meth:`fit`.
 
     Attributes
     ----------
@@ -214,16 +213,14 @@ class AutomatedIdentification(Estimator):
         damping_rows: int | None = None,
         max_iterations: int = 50,
         refine_starts: int = 3,
-        truth: Mapping[str, float] | None = None,
         n_permutations: int = 10,
         exact: bool = True,
         noise: Sequence[float] | None = None,
-        overlay: tuple[str, str] | None = None,
         shapes: str = "real",
         n_workers: int | None = None,
         executor: Executor | str | None = None,
-        progress: bool = False,
         frf: Sequence[MeasuredFRF] | None = None,
+        **deprecated: Any,
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
         self.n_gsa = n_gsa
@@ -236,20 +233,19 @@ class AutomatedIdentification(Estimator):
         self.damping_rows = damping_rows
         self.max_iterations = max_iterations
         self.refine_starts = refine_starts
-        self.truth = truth
         self.n_permutations = n_permutations
         self.exact = exact
         self.noise = noise
-        self.overlay = overlay
         self.shapes = shapes
         self.n_workers = n_workers
         self.executor = executor
-        self.progress = progress
         self.frf = frf
+        if deprecated:  # the run options that were settings (one release with a warning): defaults of fit
+            self._deprecated_run = _deprecated_run_options(deprecated, "AutomatedIdentification(...)")
 
     # -- checks -------------------------------------------------------------------------------------------------
-    def _settings(self) -> AutomatedSettings:
-        """The validated settings."""
+    def _settings(self, run: _RunOptions) -> AutomatedSettings:
+        """The validated settings, with the run's ``truth`` and ``overlay``."""
         for setting, value, low in (("n_gsa", self.n_gsa, 2), ("n_opt", self.n_opt, 1),
                                     ("max_iterations", self.max_iterations, 1),
                                     ("refine_starts", self.refine_starts, 1),
@@ -285,7 +281,7 @@ class AutomatedIdentification(Estimator):
             residual_damping_threshold=float(self.residual_damping_threshold), damping_rows=self.damping_rows,
             max_iterations=int(self.max_iterations), refine_starts=int(self.refine_starts), exact=bool(self.exact),
             noise=None if self.noise is None else tuple(self.noise), n_permutations=int(self.n_permutations),
-            truth=self.truth, overlay=self.overlay, shapes=self.shapes)
+            truth=run.truth, overlay=run.overlay, shapes=self.shapes)
 
     def _check(self, model: NumericModel, space: ParameterSpace, data: Any) -> tuple[list[int], int | None]:
         """Validated data: (identification set indices, validation set index or None)."""
@@ -318,6 +314,63 @@ class AutomatedIdentification(Estimator):
         return ident, held
 
     # -- the pipeline -------------------------------------------------------------------------------------------
+    def fit(self, data: Any, *, truth: Mapping[str, float] | None = None, overlay: tuple[str, str] | None = None,
+            progress: bool | None = None) -> AutomatedIdentification:
+        """Identify the unknowns from reference modes; the result is ``self.result_`` (and ``self.estimate_``).
+
+        Parameters
+        ----------
+        data : ModalData
+            Reference modes (``cappe.modal/1``) at one or more axis positions, at the model's sensor channels.
+        truth : mapping name -> value, optional
+            True parameters (SI) of a simulated reference: the validation step's reference FRFs then come from the
+            model at the truth (else by modal synthesis of the reference modes). Does not change the estimate.
+        overlay : (str, str), optional
+            Output and input channel (reference sensor channels) of the FRF the validation step keeps for the
+            report's overlay plot (default: the driving point with the largest peak). It is chosen here, where the
+            FRFs are computed: keeping all of them would take ``n_sensors^2 n_freq`` complex numbers per model
+            (126 MB for the machine tool's 81 channels).
+        progress : bool, optional
+            Progress bars (tqdm, stderr) per stage (default: off).
+
+        Returns
+        -------
+        self
+
+        Raises
+        ------
+        DataError
+            The data are not reference modes that fit the model, or ``overlay`` does not name two of its channels.
+        ModelError
+            The settings, unknowns, bounds or ``truth`` break a rule of the model or the method.
+        """
+        given = _RunOptions(truth=truth, overlay=overlay, progress=progress)
+        self._run = given.over(getattr(self, "_deprecated_run", None))
+        try:
+            super().fit(data)
+        finally:
+            del self._run
+        return self
+
+    def set_params(self, **params: Any) -> Self:
+        """Change settings for the next fit (see :meth:`Estimator.set_params`); ``truth``, ``overlay`` and
+        ``progress`` are accepted until cappe 0.2 with a :class:`DeprecationWarning` (pass them to :meth:`fit`).
+
+        Parameters
+        ----------
+        **params
+            ``name=value`` for any of the ``__init__`` arguments.
+
+        Returns
+        -------
+        self
+        """
+        moved = {name: params.pop(name) for name in _RunOptions.names() if name in params}
+        if moved:
+            earlier = getattr(self, "_deprecated_run", _RunOptions())
+            self._deprecated_run = _deprecated_run_options(moved, "set_params(...)").over(earlier)
+        return super().set_params(**params)
+
     def _fit(self, model: NumericModel, space: ParameterSpace, data: Any,
              rng: np.random.Generator) -> Fitted:
         if not isinstance(data, ModalData):
@@ -326,14 +379,15 @@ class AutomatedIdentification(Estimator):
         if not data.sets:
             msg = "reference modal data have no sets; the identification needs modes at one or more positions"
             raise DataError(msg)
-        settings = self._settings()
+        run = self._run
+        settings = self._settings(run.checked(model, data))
         ident, held = self._check(model, space, data)
         runner = Executor.coerce(self.executor, self.n_workers)
         # the known parameters' values: the GSA evaluates the model at its nominal vector, so hand it (and the
         # subproblems' engine, whose shared-mass reduction is that of the nominal M) the model with them as nominal
         base_model = model if np.array_equal(space.base, model.nominal) else model.with_nominal(space.base)
         setup = Setup(self.method, model, base_model, space, data, tuple(ident), held, settings, runner,
-                      self.n_workers, self.progress, _check_frf(model, data, self.frf))
+                      self.n_workers, bool(run.progress), _check_frf(model, data, self.frf))
         try:
             # BLAS on one thread in the calling thread too: the refinements' least squares take an SVD of a Jacobian
             # of about 10 000 x 27 per step, measured 51 ms on two OpenBLAS threads against 6 ms on one (the
@@ -401,6 +455,61 @@ def _check_frf(model: NumericModel, data: ModalData, frf: Sequence[MeasuredFRF] 
             raise DataError(msg)
         seen[k] = item.where()
     return items
+
+
+@dataclass(frozen=True)
+class _RunOptions:
+    """What one :meth:`AutomatedIdentification.fit` validates against and shows (not settings of the estimate).
+
+    Attributes
+    ----------
+    truth : mapping name -> value or None
+        True parameters of a simulated reference.
+    overlay : (str, str) or None
+        Output and input channel of the FRF the validation keeps.
+    progress : bool or None
+        Progress bars (None: not given).
+    """
+
+    truth: Mapping[str, float] | None = None
+    overlay: tuple[str, str] | None = None
+    progress: bool | None = None
+
+    @staticmethod
+    def names() -> tuple[str, ...]:
+        return tuple(f.name for f in fields(_RunOptions))
+
+    def over(self, defaults: _RunOptions | None) -> _RunOptions:
+        """These options, each one not given (None) taken from ``defaults``."""
+        if defaults is None:
+            return self
+        return _RunOptions(**{n: getattr(defaults, n) if getattr(self, n) is None else getattr(self, n)
+                             for n in self.names()})
+
+    def checked(self, model: NumericModel, data: ModalData) -> _RunOptions:
+        """The options checked against the model and the reference before the pipeline runs (an unknown truth
+        name or overlay channel was found only by the validation step, after the whole identification)."""
+        if self.truth is not None:
+            model.structure.resolve_parameters(dict(self.truth))  # unknown names and bad values: ModelError
+        if self.overlay is not None:
+            pair = tuple(self.overlay)
+            if len(pair) != 2 or any(c not in data.sensors for c in pair):
+                msg = (f"overlay {self.overlay!r} must be (output, input): two reference sensor channels, e.g. "
+                       f"{tuple(data.sensors[:2])}")
+                raise DataError(msg)
+        return self
+
+
+def _deprecated_run_options(given: Mapping[str, Any], where: str) -> _RunOptions:
+    """The run options given as settings (deprecated), with one warning naming them; others are a TypeError."""
+    unknown = sorted(set(given) - set(_RunOptions.names()))
+    if unknown:
+        msg = f"AutomatedIdentification got unexpected keyword argument(s) {unknown}"
+        raise TypeError(msg)
+    named = ", ".join(f"{n}=" for n in given)
+    warnings.warn(f"{where} with {named} is deprecated and stops working in cappe 0.2: pass "
+                  f"{named.replace('=', '=...')} to fit(reference, ...) instead", DeprecationWarning, stacklevel=3)
+    return _RunOptions(**given)
 
 
 def _check_set(model: NumericModel, where: str, data_set: ModalDataSet) -> None:

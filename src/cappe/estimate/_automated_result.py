@@ -321,6 +321,13 @@ class JointRefinement:
         Exact modes only: per set, the model mode paired with each reference mode at the estimate.
     values : ndarray, shape (n_unknowns,)
         The estimate (SI).
+    uncertainty : str or None
+        Exact modes: how the standard errors were formed (model-based or cluster-robust); None otherwise.
+    weighting : str or None
+        Exact modes: what weighted the residuals (the weights, the stated noise, the reference's standard
+        deviations or the residuals' own scatter).
+    shapes : str or None
+        Exact modes: ``"real"`` or ``"complex"``, the shapes compared.
     """
 
     estimate: ParameterEstimate
@@ -333,6 +340,9 @@ class JointRefinement:
     relative_change: Mapping[str, float]
     pairing: list[dict[str, Any]] | None
     values: Array
+    uncertainty: str | None = None
+    weighting: str | None = None
+    shapes: str | None = None
 
     def to_dict(self) -> dict[str, Any]:
         out: dict[str, Any] = {"cost_before": self.cost_before, "cost_after": self.cost_after,

@@ -360,15 +360,17 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
         values = np.asarray(est.values, dtype=float)
         weighting = "the residuals' own scatter per mode"
     problem.weighting = weighting
+    how = None
     if np.all(np.isfinite(values)):
         est = robust_uncertainty(est, problem.jacobian(values), problem.residuals(values), problem.groups())
+        how = str(est.diagnostics["uncertainty"]["std"])
         r = problem.residuals(values)
         est = replace(est, diagnostics={**est.diagnostics, "weighting": problem.weighting,
                                         "shapes": problem.shapes, "residuals": int(r.size)})
     return JointRefinement(
         est, fitted.cost, float(r0 @ r0), float(est.cost), bool(est.success), est.message, problem.evaluations,
         {n: float(v / c - 1.0) for n, v, c in zip(space.names, est.values, current, strict=True)},
-        problem.pairing_report(values), values)
+        problem.pairing_report(values), values, uncertainty=how, weighting=problem.weighting, shapes=problem.shapes)
 
 
 def frf_refinement_step(setup: Setup, start: Array) -> FRFRefinement:

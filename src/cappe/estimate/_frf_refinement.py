@@ -466,6 +466,11 @@ class FRFRefinement:
     warnings: tuple[str, ...] = ()
     cost_function: Any = None
 
+    @property
+    def uncertainty(self) -> str:
+        """How the standard deviations were formed (the robust-uncertainty step's words)."""
+        return str(self.estimate.diagnostics.get("uncertainty", {}).get("std", "Gauss-Newton"))
+
     def to_dict(self) -> dict[str, Any]:
         return {"cost_before": self.cost_before, "cost_after": self.cost_after, "residuals": self.n_residuals,
                 "noise": self.noise, "chi2_dof": self.chi2_dof, "positions": self.positions,

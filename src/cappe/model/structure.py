@@ -536,7 +536,7 @@ class Structure:
             index = {item.name: i for i, item in enumerate(getattr(self, group))}
         if name not in index:
             known = ", ".join(index) or "none"
-            what = "flexible body" if group == "flexible_bodies" else group[:-1]
+            what = _singular(group)
             msg = f"model '{self.name}' has no {what} named {name!r}; known: {known}"
             raise ModelError(msg)
         return index[name]
@@ -729,11 +729,11 @@ class StructureBuilder:
 
     def _claim(self, group: str, name: object, where: str) -> str:
         if not isinstance(name, str) or not NAME_PATTERN.match(name):
-            msg = f"{group[:-1]} name must be an identifier (letters, digits, _); got {name!r} ({where})"
+            msg = f"{_singular(group)} name must be an identifier (letters, digits, _); got {name!r} ({where})"
             raise ModelError(msg)
         taken = self._names.setdefault(group, {})
         if name in taken:
-            msg = f"duplicate {group[:-1]} name {name!r} ({where}); first defined at {taken[name]}"
+            msg = f"duplicate {_singular(group)} name {name!r} ({where}); first defined at {taken[name]}"
             raise ModelError(msg)
         taken[name] = where
         return name
@@ -798,12 +798,23 @@ class StructureBuilder:
         """A global location expressed in ``body``'s frame (ground: unchanged)."""
         if body == GROUND:
             return location
-        positions = {b.name: b.position for b in self._bodies} | {f.name: f.position for f in self._flexible}
-        origin = positions[body]
+        origin = next(b.position for b in self._all_bodies() if b.name == body)
         return tuple(sp.expand(location[i] - origin[i]) for i in range(3))  # type: ignore[return-value]
 
+    def _all_bodies(self) -> list[Body | FlexibleBody]:
+        """Every body declared so far, rigid then flexible (the coordinates' order); one name space (``bodies``)."""
+        return [*self._bodies, *self._flexible]
+
+    def _claim_body(self, name: object, where: str) -> str:
+        """Claim a rigid or flexible body's name (not ``ground``, not taken by either kind); returns ``where``."""
+        if name == GROUND:
+            msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
+            raise ModelError(msg)
+        self._claim("bodies", name, where)
+        return where
+
     def _require_body(self, name: object, where: str, *, allow_ground: bool) -> str:
-        known = [b.name for b in self._bodies] + [f.name for f in self._flexible]
+        known = [b.name for b in self._all_bodies()]
         if allow_ground and name == GROUND:
             return GROUND
         if name not in known:
@@ -976,11 +987,7 @@ class StructureBuilder:
         ModelError
             The name is taken or an entry breaks a rule.
         """
-        where = self._here(where, "bodies", len(self._bodies))
-        if name == GROUND:
-            msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
-            raise ModelError(msg)
-        self._claim("bodies", name, where)
+        where = self._claim_body(name, self._here(where, "bodies", len(self._bodies)))
         dof_list = list(dofs) if isinstance(dofs, (list, tuple)) else [dofs]
         bad = [d for d in dof_list if d not in DIRECTIONS]
         if bad or not dof_list or len(set(dof_list)) != len(dof_list):
@@ -1157,11 +1164,7 @@ class StructureBuilder:
         ModelError
             The name is taken or an entry breaks a rule (file, size, symmetry, definiteness, nodes).
         """
-        where = self._here(where, "flexible_bodies", len(self._flexible))
-        if name == GROUND:
-            msg = f"'ground' is reserved for the fixed frame and cannot name a body ({where})"
-            raise ModelError(msg)
-        self._claim("bodies", name, where)
+        where = self._claim_body(name, self._here(where, "flexible_bodies", len(self._flexible)))
         if frame is not None:
             if mass is not None or stiffness is not None:
                 msg = f"flexible body {name!r} takes either mass and stiffness or a frame, not both ({where})"
@@ -1628,6 +1631,11 @@ class StructureBuilder:
         index = {g: MappingProxyType({item.name: i for i, item in enumerate(getattr(structure, g))}) for g in groups}
         object.__setattr__(structure, "_index", MappingProxyType(index))
         return structure
+
+
+def _singular(group: str) -> str:
+    """What one entry of a model-file group is called in messages (``bodies`` -> ``body``, not ``bodie``)."""
+    return {"bodies": "body", "axes": "axis", "flexible_bodies": "flexible body"}.get(group, group[:-1])
 
 
 def _simplified(expr: sp.Expr) -> sp.Expr:

@@ -3,7 +3,8 @@
 Sections: parameters (estimate, uncertainty, truth and error when known), per-stage costs and timings, the
 sensitivity map (total Sobol' indices of every mode-position output) and Sobol' bar charts (paper Fig. 5), the
 subproblem selection, parameter-deviation histograms when the truth is known (paper Figs 6 and 8), validation
-statistics (paper Tables 2-5), FRF overlays with the permuted-damping model (paper Figs 7 and 9) and MACXP matrices.
+statistics (paper Tables 2-5), FRF overlays with the permuted-damping model (paper Figs 7 and 9; the FRF that
+``AutomatedIdentification.fit(overlay=...)`` kept) and MACXP matrices.
 """
 
 from __future__ import annotations
