@@ -488,7 +488,9 @@ class NumericModel:
         self._source_coef = _Coefficients(coefficients, self._param_symbols, self._axis_symbols)
         # code for the rows' structural non-zeros only (an elongation row touches one or two bodies), scattered
         where = [(j * self.n_dof + k) for j, row in enumerate(rows) for k, v in enumerate(row) if v != 0]
-        entries = [v for row in rows for v in row if v != 0]
+        # numbers evaluated to 17 digits first: an exact square root of a large integer (a tilted axis written with
+        # decimals normalizes to one) is a Python int under numpy's sqrt, which fails beyond int64
+        entries = [sp.N(sp.sympify(v), 17) for row in rows for v in row if v != 0]
         self._source_row_where = np.array(where, dtype=np.intp)
         self._source_rows = sp.lambdify(all_symbols, entries, modules="numpy", cse=True)
         axis_set = set(self._axis_symbols)
