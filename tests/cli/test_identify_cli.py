@@ -5,6 +5,7 @@ from __future__ import annotations
 import argparse
 import json
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -144,3 +145,24 @@ def test_identify_usage_errors(files, capsys):
     code = cli(["identify", str(files["model"]), "--reference", str(files["ref"]), "--set", "nope=1"])
     assert code == 1
     assert "unknown parameter 'nope'" in capsys.readouterr().err
+
+
+def test_parameters_the_data_do_not_determine_get_a_warning_line() -> None:
+    """A nan std in the table was the only sign that two mounts in parallel were not told apart (three-axis run)."""
+    from cappe.cli.identify import _parameter_rows
+    from cappe.estimate import ParameterEstimate
+
+    n = 3
+    est = ParameterEstimate(
+        method="automated", names=("k1", "k2", "k3"), values=np.array([1.0, 2.0, 3.0]),
+        std=np.array([0.01, np.nan, np.nan]), ci95=np.full((n, 2), np.nan), correlation=np.eye(n),
+        identifiable=np.array([True, False, False]), combinations=("+0.71 k2 +0.71 k3",),
+    )
+    lines = _parameter_rows(est, None)
+    warning = [line for line in lines if line.startswith("warning:")]
+    assert len(warning) == 1
+    assert "k2, k3" in warning[0]
+    assert "+0.71 k2 +0.71 k3" in warning[0]
+    assert "k1" not in warning[0]
+    fine = replace(est, std=np.array([0.01, 0.02, 0.03]), identifiable=np.ones(n, bool), combinations=())
+    assert not [line for line in _parameter_rows(fine, None) if line.startswith("warning:")]

@@ -373,4 +373,10 @@ def _parameter_rows(estimate: ParameterEstimate, truth: dict[str, float] | None)
         lines.append(row)
     if errors:
         lines.append(f"  worst |error| {max(errors):.3g} %")
+    undetermined = [n for k, n in enumerate(estimate.names)
+                    if not (np.isfinite(estimate.std[k]) and estimate.identifiable[k])]
+    if undetermined:  # a nan in the std column alone was the only sign of it (issue 24's three-axis run)
+        said = f"; least determined: {'; '.join(estimate.combinations)}" if estimate.combinations else ""
+        lines.append(f"warning: the data do not determine {', '.join(undetermined)} (no finite or usable standard "
+                     f"error): their values are one of many that fit as well{said}")
     return lines
