@@ -20,7 +20,7 @@ loosely, the healthy stream's deviations are also replayed through the charts in
 
 ``python -m benchmarks.bench_operational CHAIN [N_HEALTHY N_TRIALS N_BASELINE]`` (CHAIN ``operational`` or
 ``hammer``; defaults 1000, 20, 96) writes ``benchmarks/results/operational_CHAIN.json`` (about 0.5 s per operational
-measurement on one core: run it with ``OPENBLAS_NUM_THREADS=1``).
+measurement, BLAS on one thread as a ``cappe`` command runs).
 """
 
 from __future__ import annotations
@@ -36,6 +36,7 @@ import numpy as np
 from benchmarks._common import write_results
 from cappe.model import NumericModel, load_model
 from cappe.monitor import Monitor, default_config, simulate_operation, simulate_scenario
+from cappe.parallel import blas_threads
 
 OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
 BAND = (150.0, 1000.0)
@@ -168,7 +169,8 @@ def main() -> None:
     if kind not in ("operational", "hammer"):
         msg = f"chain must be 'operational' or 'hammer'; got {kind!r}"
         raise SystemExit(msg)
-    row = run_chain(kind, n_healthy, n_trials, n_baseline)
+    with blas_threads(1):  # as a cappe command runs (cappe.parallel.command_blas_threads): ~10x on 2 cores
+        row = run_chain(kind, n_healthy, n_trials, n_baseline)
     print(f"wrote {write_results(f'operational_{kind}', [row])}")
 
 
