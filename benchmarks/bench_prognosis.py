@@ -23,6 +23,7 @@ from benchmarks._common import write_results
 from cappe.model import NumericModel, load_model
 from cappe.monitor import Monitor, default_config, forecast_crossing, simulate_scenario
 from cappe.monitor._chain import SIZE_SCALE_STD
+from cappe.parallel import blas_threads
 
 OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
 START = datetime(2026, 1, 5, 6, 0, tzinfo=UTC)
@@ -31,6 +32,11 @@ AT = 8  # measurements after the first alarm at which the forecast is made
 
 
 def main() -> None:
+    with blas_threads(1):  # as a cappe command runs (cappe.parallel.command_blas_threads)
+        _main()
+
+
+def _main() -> None:
     n_seq = int(sys.argv[1]) if len(sys.argv) > 1 else 200
     model = NumericModel(load_model("builtin:spindle-bearing"))
     config = default_config(model, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
