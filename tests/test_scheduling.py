@@ -3,11 +3,18 @@
 from __future__ import annotations
 
 import ast
+import importlib.util
 from pathlib import Path
 
-from conftest import SPREAD, work_unit
-
 ROOT = Path(__file__).resolve().parents[1]
+# tests/conftest.py by its path: ``import conftest`` finds whichever conftest module was imported first (a worker that
+# ran tests/monitor first has tests/monitor/conftest.py under that name)
+_SPEC = importlib.util.spec_from_file_location("cappe_tests_conftest", ROOT / "tests" / "conftest.py")
+assert _SPEC is not None
+assert _SPEC.loader is not None
+_CONFTEST = importlib.util.module_from_spec(_SPEC)
+_SPEC.loader.exec_module(_CONFTEST)
+SPREAD, work_unit = _CONFTEST.SPREAD, _CONFTEST.work_unit
 
 
 def test_spread_files_and_their_ordered_tests_exist():

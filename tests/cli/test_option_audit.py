@@ -674,6 +674,12 @@ EXEMPT = {
     ("identify", "model"): "the model being identified: every identify case drives it (tests/cli/test_identify_cli)",
     ("identify", "--workers"): "same result by design on any worker count (tests/test_parallel.py checks that)",
     ("identify", "--executor"): "same result by design on every executor (tests/test_parallel.py checks that)",
+    ("identify", "--frf"): "needs measured FRFs of a model with its own generator: tests/estimate/"
+                           "test_frf_refinement.py::test_frf_refinement_brings_damping_within_target (damping 25 % -> "
+                           "5 % with the option)",
+    ("identify", "--frf-position"): "places the --frf files: tests/estimate/test_frf_refinement.py::"
+                                    "test_bad_frf_input_names_the_file (a position no reference has is refused, so "
+                                    "the option is read)",
     ("identify", "--scheduler"): "needs a running Dask cluster (tests/test_parallel.py with the distributed extra)",
     ("monitor history", "store"): "the store is the data every monitor case reads",
     ("monitor ingest", "store"): "the store is the data every monitor case reads",

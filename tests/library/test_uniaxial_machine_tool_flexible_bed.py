@@ -124,7 +124,7 @@ def test_ideal_case_stiffness_within_1_percent_on_a_subset(machine):
     reference = reference_modes(machine, params=params, positions=[{"z": -0.294}, {"z": 0.135}, {"z": 0.33}],
                                 n_modes=12)
     est = AutomatedIdentification(machine, unknowns=unknowns, n_gsa=32, n_opt=4, validation={"z": -0.294},
-                                  truth=truth, rng=5, n_permutations=0).fit(reference)
+                                  rng=5, n_permutations=0).fit(reference, truth=truth)
     errors = est.estimate_.relative_error(truth)
     assert max(abs(errors[n]) for n in ("lgs_kx", "lgs_ky", "me1_ky")) < 0.01, errors
     assert max(abs(errors[n]) for n in ("me1_dy", "cpl_drz")) < 0.05, errors

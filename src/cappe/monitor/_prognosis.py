@@ -150,7 +150,7 @@ def forecast_crossing(
     --------
     >>> t = np.arange(10.0)
     >>> f = forecast_crossing(t, -0.02 * t + 0.001 * np.cos(7 * t), -0.25)
-    >>> round(f.time, 1), f.lower < f.time < f.upper
+    >>> round(f.time, 1), bool(f.lower < f.time < f.upper)
     (12.5, True)
     """
     t = np.asarray(times, dtype=float)
