@@ -279,8 +279,17 @@ def test_bad_files_and_nodes_are_one_line_errors(tmp_path: Path) -> None:
     np.savez(tmp_path / "objs.npz", K=np.array([{"a": 1}], dtype=object))
     (tmp_path / "junk.mtx").write_text("not a matrix market file\n")
     np.savez(tmp_path / "two.npz", K=k, M=m)
+    (tmp_path / "empty.mat").write_bytes(b"")
+    scipy.io.savemat(tmp_path / "whole.mat", {"K": k})
+    (tmp_path / "cut.mat").write_bytes((tmp_path / "whole.mat").read_bytes()[:150])
+    # a MATLAB v7.3 header (116 bytes of text, 8 of subsystem offset, version 0x0200, endian 'IM'), then HDF5
+    header = b"MATLAB 7.3 MAT-file, Platform: GLNXA64, HDF5 schema 1.00 .".ljust(116) + bytes(8) + b"\x00\x02IM"
+    (tmp_path / "v73.mat").write_bytes(header + b"\x89HDF\r\n\x1a\n" + bytes(64))
     b = StructureBuilder("bad", source="m.yaml", base=tmp_path)
     cases = [
+        ("empty.mat", r"cannot read matrix file .*empty.mat: .*\(m.yaml, flexible_bodies\[0\].mass\)"),
+        ("cut.mat", r"cannot read matrix file .*cut.mat: .*\(m.yaml, flexible_bodies\[0\].mass\)"),
+        ("v73.mat", r"v73.mat is a MATLAB v7.3 \(HDF5\) file: save it with .*-v7.*\(m.yaml, flexible_bodies\[0\].mass\)"),
         ("objs.npz", r"cannot read matrix file .*objs.npz: .*pickle.*\(m.yaml, flexible_bodies\[0\].mass\)"),
         ("junk.mtx", r"cannot read matrix file .*junk.mtx.*\(m.yaml, flexible_bodies\[0\].mass\)"),
         ("two.npz", r"holds K, M: name one with 'key' \(m.yaml, flexible_bodies\[0\].mass\)"),

@@ -13,6 +13,7 @@ import numpy as np
 import scipy.io
 import scipy.sparse as sps
 from numpy.typing import NDArray
+from scipy.io.matlab import MatReadError, matfile_version
 
 from cappe.exceptions import ModelError
 
@@ -92,8 +93,8 @@ def read_matrix(spec: object, base: Path | None, where: str, *, square: bool = T
             raw = _from_npz(path, key, where, square)
     except ModelError:
         raise
-    # scipy raises NotImplementedError for MATLAB v7.3 (HDF5) files and EOFError for cut ones: both are bad input
-    except (OSError, ValueError, TypeError, KeyError, IndexError, NotImplementedError, EOFError) as exc:
+    # scipy raises MatReadError for empty .mat files and EOFError or OSError for cut ones: all bad input
+    except (OSError, ValueError, TypeError, KeyError, IndexError, EOFError, MatReadError) as exc:
         reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         msg = f"cannot read matrix file {path}: {reason} ({where})"
         raise ModelError(msg) from exc
@@ -107,9 +108,12 @@ def _no_key(key: str | None, where: str) -> None:
 
 
 def _from_mat(path: Path, key: str | None, where: str, square: bool) -> object:
-    names = [entry[0] for entry in scipy.io.whosmat(str(path))]
-    key = _choose(names, key, path, where)
-    shape = next(entry[1] for entry in scipy.io.whosmat(str(path)) if entry[0] == key)
+    if matfile_version(str(path))[0] == 2:  # MATLAB v7.3 files are HDF5, which scipy does not read
+        msg = f"matrix file {path} is a MATLAB v7.3 (HDF5) file: save it with save(..., '-v7') ({where})"
+        raise ModelError(msg)
+    entries = {entry[0]: entry[1] for entry in scipy.io.whosmat(str(path))}
+    key = _choose(list(entries), key, path, where)
+    shape = entries[key]
     _check_shape(tuple(int(v) for v in shape), path, where, square)
     return scipy.io.loadmat(str(path), variable_names=[key])[key]
 
