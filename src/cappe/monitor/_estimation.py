@@ -191,7 +191,13 @@ class FactorEstimator:
         self._grid: tuple[bytes, Array, CArray] | None = None  # lines -> weights cache
         self._start: tuple[tuple[bytes, bytes], CArray, Array] | None = None  # start point -> model, Jacobian
 
+    @property
+    def members(self) -> tuple[NDArray[np.intp], ...]:
+        """Each group's parameters, as indices into the model's parameters (one array per group)."""
+        return tuple(self._members)
+
     # -- model side -----------------------------------------------------------------------------------------
+
     def parameters(self, log_factor: Array) -> Array:
         """The model parameter vector at group log-factors ``log_factor``.
 
@@ -579,9 +585,9 @@ class ModalFactorEstimator:
             self.sensors.append(hits[0])
         self._order = np.array([DERIVATIVE_ORDER[model.output_quantities[model.output_names.index(o)]]
                                 for o in factors.outputs])
-        self._unknowns = [model.parameter_names[i] for members in factors._members for i in members]
-        self._columns = np.concatenate(factors._members)
-        self._group_of = np.concatenate([np.full(m.size, g) for g, m in enumerate(factors._members)])
+        self._unknowns = [model.parameter_names[i] for members in factors.members for i in members]
+        self._columns = np.concatenate(factors.members)
+        self._group_of = np.concatenate([np.full(m.size, g) for g, m in enumerate(factors.members)])
         values = dict(zip(model.parameter_names, factors.reference.tolist(), strict=True))
         self._space = ParameterSpace.from_model(model, self._unknowns, values=values, log=False)
 
