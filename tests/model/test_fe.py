@@ -273,6 +273,8 @@ def test_a_frame_body_in_the_builder_equals_the_same_matrices_given_as_arrays() 
      r"beam points must be at least two finite \[x, y, z\] \(m\); got \[\[0, 0, 0\]\] \(t.beams\[0\].points\)"),
     ({"beams": [{"points": [[0, 0, 0], [0, 0, 0]], "section": "col"}]},
      r"beam points \[0.0, 0.0, 0.0\] and \[0.0, 0.0, 0.0\] coincide \(t.beams\[0\].points\)"),
+    ({"beams": [{"points": [[k, 0, 0] for k in range(30)], "section": "col", "divide": 1000}]},
+     r"the frame would have more than 20000 beam elements .* \(t.beams\[0\]\)"),
     ({"beams": [{"points": [[0, 0, 0], [1, 0, 0]], "sect": "col"}]},
      r"a beam is \{points: \[\[x, y, z\], ...\], section: NAME, divide: n\}; got .* \(t.beams\[0\]\)"),
 ])
