@@ -34,6 +34,14 @@ def test_plan_test_writes_a_plan_the_simulate_chain_takes(tmp_path, capsys):
     assert doc["unknowns"]["bsd_drz"]["determined"] is False
     assert any(line.startswith("not determined by this plan") and "bsd_drz" in line for line in text.splitlines())
     assert "3 random plans of the same size" in text
+    # plans are compared by the median std over the unknowns every candidate together determines (the median over
+    # all also counts those no plan determines), and the text says which is which
+    keep = [n for n, u in doc["unknowns"].items() if n not in doc["undetermined_with_all_candidates"]]
+    median = sorted(doc["unknowns"][n]["relative_std"] for n in keep)
+    assert doc["median_relative_std_determinable"] == pytest.approx(
+        (median[(len(median) - 1) // 2] + median[len(median) // 2]) / 2, rel=1e-12)
+    assert len(doc["random_plans"]["median_relative_std_determinable"]) == 3
+    assert f"median std over the {len(keep)} unknowns every candidate together determines" in text
     # the ready command line runs and gives modes at exactly the plan's positions and channels
     argv = shlex.split(doc["commands"]["simulate"])[1:]
     i = argv.index("--params")

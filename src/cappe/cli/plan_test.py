@@ -156,6 +156,11 @@ def _pct(value: float) -> str:
     return f"{100 * value:9.3g}" if np.isfinite(value) else f"{'-':>9s}"
 
 
+def _range(values: list[float]) -> str:
+    finite = [v for v in values if np.isfinite(v)]
+    return f"{100 * min(finite):.3g} to {100 * max(finite):.3g}" if finite else "-"
+
+
 def _text(plan: Any, doc: dict[str, Any], args: argparse.Namespace) -> str:
     c = plan.candidates
     label = "; ".join(" ".join(f"{k}={v:g}" for k, v in p.items()) or "(no axes)" for p in plan.positions)
@@ -185,12 +190,19 @@ def _text(plan: Any, doc: dict[str, Any], args: argparse.Namespace) -> str:
         lines.append(f"undetermined combination (relative): {combo}")
     rnd = plan.random
     if rnd:
+        n_det = len(c.unknowns) - len(plan.undetermined_with_all)
+        det = rnd["median_relative_std_determinable"]
         lines.append(
             f"{rnd['n']} random plans of the same size: log det {min(rnd['criterion']):.1f} to "
-            f"{max(rnd['criterion']):.1f} (this plan {plan.criterion:.1f}); median std "
-            f"{100 * min(rnd['median_relative_std']):.3g} to {100 * max(rnd['median_relative_std']):.3g} % (this "
-            f"plan {100 * float(np.median(plan.relative_std)):.3g} %); undetermined {min(rnd['n_undetermined'])} to "
-            f"{max(rnd['n_undetermined'])} (this plan {len(plan.undetermined)})")
+            f"{max(rnd['criterion']):.1f} (this plan {plan.criterion:.1f}); median std over the {n_det} unknowns "
+            f"every candidate together determines {_range(det)} % (this plan "
+            f"{100 * plan.median_relative_std_determinable:.3g} %), over all {len(c.unknowns)} "
+            f"{_range(rnd['median_relative_std'])} % (this plan {100 * float(np.median(plan.relative_std)):.3g} %); "
+            f"undetermined {min(rnd['n_undetermined'])} to {max(rnd['n_undetermined'])} (this plan "
+            f"{len(plan.undetermined)})")
+        if n_det < len(c.unknowns):
+            lines.append("(the median over all unknowns also counts those that even every candidate together leaves "
+                         "undetermined; the D-criterion does not aim at it)")
     lines.append("rehearse it on simulated data:")
     lines.append(f"  {doc['commands']['simulate']}")
     lines.append(f"  {doc['commands']['identify']}")

@@ -25,7 +25,12 @@ on a fixed mode-shape matrix, Kammer 1991) does not: here the unknowns are the t
 prior ``delta I`` (relative std 1000, ``delta = 1e-6``) keeps the criterion finite while a plan is still rank
 deficient, so the greedy steps can rank candidates. Greedy selection with pairwise exchange (Fedorov's exchange on
 the discrete candidates) is not guaranteed to reach the exhaustive optimum, but every plan it returns has no single
-improving swap.
+improving swap. Plans are compared by the median expected std over the unknowns that every candidate together
+determines (:attr:`MeasurementPlan.median_relative_std_determinable`): on the three-axis machine the D-optimal plan
+is best there (2.3 % against 3.5-4.4 % for 10 random plans) but not by the median over all 61 unknowns (6.5 %
+against 6.1-20 %), which also counts the 17 that no plan determines; an A-optimal search (the sum of those
+determinable unknowns' log-variances) reached 5.6 % over all 61 but 3.2 % over the determinable ones and a smaller
+determinant, so neither criterion aims at the median over all and D-optimality is kept.
 
 The search never builds a trial plan's Jacobian: at a position the Fisher matrix of a channel set is a sum over the
 seen modes of terms built from statistics that add over channels (``sum dphi dphi^T``, ``sum phi dphi``,
@@ -38,6 +43,7 @@ per candidate position, and a position swap only sums cached blocks (the three-a
 from __future__ import annotations
 
 import itertools
+import math
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any
@@ -345,6 +351,17 @@ class MeasurementPlan:
         return [n for n, s in zip(self.candidates.unknowns, self.best_relative_std, strict=True)
                 if not s <= self.max_relative_std]
 
+    @property
+    def median_relative_std_determinable(self) -> float:
+        """Median expected relative std over the unknowns that every candidate together determines (nan if none).
+
+        The summary to compare plans by: the median over all unknowns also counts those no plan determines, whose
+        std (large or infinite) pushes the median onto whichever weakly determined unknowns a plan happens to
+        reach, not onto how well it determines what can be determined.
+        """
+        keep = self.best_relative_std <= self.max_relative_std
+        return float(np.median(self.relative_std[keep])) if np.any(keep) else math.nan
+
     def to_dict(self) -> dict[str, Any]:
         c = self.candidates
         std = self.uncertainty.std
@@ -370,6 +387,8 @@ class MeasurementPlan:
             "max_relative_std": self.max_relative_std,
             "undetermined": self.undetermined,
             "undetermined_with_all_candidates": self.undetermined_with_all,
+            "median_relative_std": float(np.median(self.relative_std)),
+            "median_relative_std_determinable": num(self.median_relative_std_determinable),
             "combinations": list(self.uncertainty.combinations),
             "rank": self.uncertainty.rank,
             "candidates": {"positions": [dict(p) for p in c.positions], "sensors": list(c.sensors)},
@@ -633,16 +652,19 @@ def plan_test(
     random: dict[str, Any] = {}
     if n_random > 0:
         gen = np.random.default_rng(rng)
-        crits, medians, counts = [], [], []
+        determinable = best <= max_relative_std
+        crits, medians, medians_det, counts = [], [], [], []
         for _ in range(n_random):
             rp = sorted(gen.choice(n_pos, n_positions, replace=False).tolist())
             rs = sorted(gen.choice(n_ch, n_sensors, replace=False).tolist())
             rel = _relative(candidates.uncertainty(rp, rs))
             crits.append(candidates.criterion(rp, rs))
             medians.append(float(np.median(rel)))
+            medians_det.append(float(np.median(rel[determinable])) if np.any(determinable) else math.nan)
             counts.append(int(np.sum(~(rel <= max_relative_std))))
         random = {"n": n_random, "seed": rng if isinstance(rng, int) else None, "criterion": crits,
-                  "median_relative_std": medians, "n_undetermined": counts}
+                  "median_relative_std": medians, "median_relative_std_determinable": medians_det,
+                  "n_undetermined": counts}
     return MeasurementPlan(
         candidates=candidates,
         position_index=tuple(positions),
