@@ -10,10 +10,19 @@ stages scale with N and N_opt linearly, so the exponents carry over.
 Two sweeps: n_dof = 30 ... 300 with 27 unknowns (20 stiffness, 7 damping), and 27 ... 100 unknowns at n_dof = 120.
 Reported: time per stage and in total, and the growth exponents b of t ~ x^b (least squares on log-log), written
 to ``benchmarks/results/scaling.json`` with a plot ``scaling.png``.
+
+``python -m benchmarks.bench_scaling dask``: the GSA stage of ``cappe identify`` on ``builtin:three-axis-machine-tool``
+(61 unknowns, Sobol' N = 16 as ``--n-gsa 16``, i.e. 16 x 63 model runs per position, at 2 of the grid's corners, 25
+modes, the four criteria) serially, then on a real local Dask cluster started here (``distributed.LocalCluster``:
+a scheduler and 1, then 2 worker processes of one thread each): the Sobol' indices must be identical, and the wall
+and CPU times give the scaling (``results/scaling_dask.json``). This host has 2 cores shared with other work: 2
+workers is its limit, and the load is recorded.
 """
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 from typing import Any
 
@@ -86,7 +95,51 @@ def exponent(x: list[float], t: list[float]) -> float:
     return float(np.polyfit(np.log(x), np.log(t), 1)[0])
 
 
+def dask() -> None:
+    """The three-axis GSA stage serially and on a local Dask cluster of 1 and 2 workers: identical indices."""
+    from distributed import Client, LocalCluster
+
+    from cappe.estimate import ParameterSpace
+    from cappe.model import load_model
+    from cappe.sensitivity import model_sobol
+
+    nm = NumericModel(load_model("builtin:three-axis-machine-tool"))
+    space = ParameterSpace.from_model(nm)
+    truth = space.mapping(space.sample(1))
+    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
+    reference = reference_modes(nm, params=truth, positions=positions, n_modes=25)
+
+    def gsa(executor: str) -> tuple[Any, float, float, float]:
+        load = os.getloadavg()[0]
+        wall, cpu = time.perf_counter(), time.process_time()
+        result = model_sobol(nm, reference, n=16, rng=0, executor=executor)
+        return result, time.perf_counter() - wall, time.process_time() - cpu, load
+
+    serial, wall_s, cpu_s, load_s = gsa("serial")
+    rows: list[dict[str, Any]] = [{"executor": "serial", "workers": 1, "wall_s": wall_s, "client_cpu_s": cpu_s,
+                                   "load": load_s, "identical": True}]
+    print(f"serial: {wall_s:.1f} s wall ({cpu_s:.1f} s CPU), load {load_s:.1f}", flush=True)
+    for workers in (1, 2):
+        with (LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+              Client(cluster) as client):
+            before = client.run(time.process_time)
+            result, wall, cpu, load = gsa(cluster.scheduler_address)
+            after = client.run(time.process_time)
+        worker_cpu = sum(after[w] - before[w] for w in after)
+        same = all(np.array_equal(getattr(result.sobol, k), getattr(serial.sobol, k)) for k in ("S1", "ST"))
+        rows.append({"executor": "dask LocalCluster", "workers": workers, "wall_s": wall, "client_cpu_s": cpu,
+                     "worker_cpu_s": worker_cpu, "load": load, "identical": same, "speed_up_vs_serial": wall_s / wall})
+        print(f"dask, {workers} worker(s): {wall:.1f} s wall (client {cpu:.1f} s CPU, workers {worker_cpu:.1f} s "
+              f"CPU), load {load:.1f}; identical to serial: {same}", flush=True)
+    rows.append({"model": "three-axis-machine-tool", "stage": "GSA (model_sobol)", "n": 16, "unknowns": space.n,
+                 "positions": positions, "n_modes": 25, "model_runs": 16 * (space.n + 2) * len(positions)})
+    write_results("scaling_dask", rows)
+
+
 def main() -> None:
+    if sys.argv[1:] == ["dask"]:
+        dask()
+        return
     rows = []
     for n_bodies in (5, 10, 20, 30, 50):
         rows.append({"sweep": "n_dof", **run(n_bodies, 27)})
