@@ -28,9 +28,9 @@ the discrete candidates) is not guaranteed to reach the exhaustive optimum, but 
 improving swap. Plans are compared by the median expected std over the unknowns that every candidate together
 determines (:attr:`MeasurementPlan.median_relative_std_determinable`): on the three-axis machine the D-optimal plan
 is best there (2.3 % against 3.5-4.4 % for 10 random plans) but not by the median over all 61 unknowns (6.5 %
-against 6.1-20 %), which also counts the 17 that no plan determines; an A-optimal search (the sum of those
-determinable unknowns' log-variances) reached 5.6 % over all 61 but 3.2 % over the determinable ones and a smaller
-determinant, so neither criterion aims at the median over all and D-optimality is kept.
+against 6.1-20 %), which also counts the 17 that even every candidate together leaves undetermined. An A-optimal
+search (the sum of the determinable unknowns' log-variances) reached 5.6 % over all 61 but 3.2 % over the
+determinable ones and a smaller determinant: neither criterion aims at the median over all; D-optimality is kept.
 
 The search never builds a trial plan's Jacobian: at a position the Fisher matrix of a channel set is a sum over the
 seen modes of terms built from statistics that add over channels (``sum dphi dphi^T``, ``sum phi dphi``,
