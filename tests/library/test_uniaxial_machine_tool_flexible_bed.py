@@ -150,3 +150,88 @@ def test_cappe_identify_ideal_case_all_stiffness_within_1_percent(machine, tmp_p
     assert len(stiffness) == 16
     assert max(abs(e) for e in stiffness.values()) < 0.01, stiffness
     assert max(abs(e) for e in damping.values()) < 0.05, damping
+
+
+#: the rigid variant's rule for disturbable known parameters (its file; paper 3.3): +10 % of the parameter alone moves
+#: no stiffness unknown by more than 1.2 % in the linearised least-squares fit of the 16 stiffness unknowns to the
+#: exact modes at z2..z4, and a mass, inertia or stiffness shifts no undamped frequency below 400 Hz by more than 0.1 %
+FIT_LIMIT, SHIFT_LIMIT = 0.012, 1e-3
+
+
+def _fit_bias(machine: NumericModel) -> dict[str, tuple[float, str]]:
+    """Per known parameter, the largest relative change of a stiffness unknown (and which) in the linearised fit:
+    exact modes at z2..z4 (20 tracked modes: frequencies relative, complex shapes at the 81 channels divided by
+    each nominal shape's largest entry), the unknowns' Jacobian by central differences (+-1e-4 relative)."""
+    from cappe.modal import ModalEngine
+
+    names = list(machine.parameter_names)
+    stiffness = [p.name for p in machine.structure.parameters if p.unknown and p.kind == "stiffness"]
+    known = [p.name for p in machine.structure.parameters if not p.unknown]
+    step = 1e-4
+    rows = [machine.nominal.copy()]
+    for name in stiffness:
+        for sign in (1, -1):
+            rows.append(machine.nominal.copy())
+            rows[-1][names.index(name)] *= 1 + sign * step
+    for name in known:
+        rows.append(machine.nominal.copy())
+        rows[-1][names.index(name)] *= 1.1
+    params = np.array(rows)
+    engine = ModalEngine(machine, n_modes=20, n_workers=1)
+    parts = []
+    for z in POSITIONS_FIT:
+        batch = engine.evaluate(params, {"z": z}, track=engine.reference(None, {"z": z}), exact=True)
+        freq = np.abs(batch.poles) / np.abs(batch.poles[0]) - 1
+        shapes = batch.complex_shapes[0]
+        largest = shapes[np.argmax(np.abs(shapes), axis=0), np.arange(shapes.shape[1])]
+        # each shape turned to the nominal one's phase (a mode's sign is arbitrary: eigh may flip it)
+        turn = np.einsum("bsm,sm->bm", batch.complex_shapes.conj(), shapes)
+        change = (batch.complex_shapes * (turn / np.abs(turn))[:, None, :] - shapes) / largest
+        parts.append(np.hstack([freq, change.real.reshape(len(params), -1), change.imag.reshape(len(params), -1)]))
+    features = np.hstack(parts)
+    n_s = len(stiffness)
+    jacobian = (features[1:1 + 2 * n_s:2] - features[2:2 + 2 * n_s:2]).T / (2 * step)
+    bias = -np.linalg.pinv(jacobian) @ features[1 + 2 * n_s:].T  # (n_stiffness, n_known)
+    worst = np.argmax(np.abs(bias), axis=0)
+    return {name: (float(abs(bias[worst[j], j])), stiffness[worst[j]]) for j, name in enumerate(known)}
+
+
+POSITIONS_FIT = (-0.060, 0.135, 0.330)
+
+
+@pytest.mark.slow
+def test_disturbable_known_parameters_follow_the_rigid_variants_rule(machine):
+    # The rigid variant's tags were copied here unchecked. The same linearisation on the rigid variant gives its
+    # file's 40 tags (eta_j1_rz out at 1.20 % where its file says 1.3 %; brake_eta in at 0.91 %, left out there).
+    # Here the 23 copied tags pass, and so do eta_bed (0.86 %: the bed's loss factor, in place of the rigid bed's 18
+    # joint loss factors) and fb_kr (0.70 %; 5.3 % on the rigid variant): 25 in all.
+    bias = _fit_bias(machine)
+    params = machine.structure.parameters
+    disturbable = {p.name for p in params if p.disturbable}
+    assert not any(p.disturbable for p in params if p.unknown)
+    assert len(disturbable) == 25
+    for p in params:
+        if p.unknown:
+            continue
+        shift = 0.0
+        if p.kind in ("mass", "inertia", "stiffness"):  # scipy's eigh on (K, M), not the modal engine
+            for z in POSITIONS_FIT:
+                f0 = _undamped_hz(machine, z)
+                system = machine.system({p.name: 1.1 * p.value}, {"z": z})
+                f1 = np.sqrt(np.clip(scipy.linalg.eigh(system.K, system.M, eigvals_only=True), 0, None)) / (2 * np.pi)
+                band = f0 < 400.0
+                shift = max(shift, float(np.max(np.abs(f1[band] / f0[band] - 1))))
+        passes = bias[p.name][0] <= FIT_LIMIT and shift <= SHIFT_LIMIT
+        assert passes == p.disturbable, (p.name, bias[p.name], shift)
+
+
+def test_disturb_perturbs_the_tagged_parameters_only(tmp_path: Path, capsys):
+    # `cappe simulate --disturb` on this model (paper 3.3): each disturbable parameter off by +-10 %, the rest nominal
+    assert main(["simulate", MODEL, "--disturb", "0.1", "--seed", "3", "--modes", "3", "--json",
+                 "-o", str(tmp_path / "ref.json")]) == 0
+    values = json.loads(capsys.readouterr().out)["parameters"]  # the values that differ from the file's
+    structure = load_model(MODEL)
+    assert set(values) == {p.name for p in structure.parameters if p.disturbable}
+    for name, value in values.items():
+        nominal = structure.parameter(name).value
+        assert value in (pytest.approx(0.9 * nominal, rel=1e-15), pytest.approx(1.1 * nominal, rel=1e-15)), name

@@ -150,7 +150,10 @@ def _fixed_interface_modes(k_ii: sps.csc_array, m_ii: sps.csc_array, lu: spla.Su
 
             lam, phi = scipy.linalg.eigh(k_ii.toarray(), m_ii.toarray())
         else:
-            lam, phi = spla.eigsh(k_ii, k=want, M=m_ii, sigma=0.0, which="LM", OPinv=op)
+            # a fixed start vector: ARPACK's own is random, and the reduced matrices of one model then differed
+            # from load to load (other signs and mixes of the modal coordinates)
+            start = np.random.default_rng(0).standard_normal(size)
+            lam, phi = spla.eigsh(k_ii, k=want, M=m_ii, sigma=0.0, which="LM", OPinv=op, v0=start)
         order = np.argsort(lam)
         lam, phi = lam[order], phi[:, order]
         if cut is None:
@@ -162,4 +165,6 @@ def _fixed_interface_modes(k_ii: sps.csc_array, m_ii: sps.csc_array, lu: spla.Su
             break
         want *= 2
     norms = np.sqrt(np.einsum("ij,ij->j", phi, m_ii @ phi))
-    return lam, phi / norms
+    # each mode's sign fixed by its largest entry (positive): the same coordinates from either eigensolver
+    largest = phi[np.argmax(np.abs(phi), axis=0), np.arange(phi.shape[1])]
+    return lam, phi * (np.where(largest < 0, -1.0, 1.0) / norms)
