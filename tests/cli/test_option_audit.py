@@ -688,7 +688,7 @@ CASES = [
                              "--json"], extra,
             extended=f"the demo's identification stage takes a minute; the identify {option} case of this audit "
                      "drives the same option of the same stage on the small slide in seconds")
-      for option, extra in (("--report", ["--report", "{w}/d2.html"]), ("--n-gsa", ["--n-gsa", "64"]),
+      for option, extra in (("--report", ["--report", "{w}/d2.html"]), ("--n-gsa", ["--n-gsa", "16"]),
                             ("--n-opt", ["--n-opt", "3"]), ("--seed", ["--seed", "2"]))],
 ]
 
