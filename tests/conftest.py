@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+from collections import OrderedDict
 from pathlib import Path
 
 import pytest
@@ -31,10 +32,28 @@ def pytest_configure(config: pytest.Config) -> None:
 #: ``--dist loadfile`` (its module fixtures built once). A file of many independent slow cases held one worker for
 #: minutes after the others were done; spread, each worker builds the module fixtures it needs once.
 SPREAD: dict[str, tuple[str, ...]] = {
-    "tests/cli/test_option_audit.py": (),  # 347 command-line cases; its data folder takes ~35 s per worker
+    "tests/cli/test_option_audit.py": (),  # 350 command-line cases; its data folder (~15 s) is built once per run
     # the README's commands read each other's files: one unit, in order
     "tests/cli/test_model_cli.py": ("test_readme_command_runs_as_subprocess",),
 }
+
+
+#: Units of work (see :func:`work_unit`) that ``make test`` and ``make test-slow`` start first, longest first (wall
+#: seconds on one worker in the last full runs, quiet host). xdist's own order starts the units of most tests first;
+#: a long unit of few tests then started near the end and held one worker while the other had nothing left to do
+#: (``make test-slow``: the flexible bed's 57 s identification started at 120 s of 200). A unit not in the run
+#: being scheduled is passed over.
+FIRST: tuple[str, ...] = (
+    "tests/cli/test_model_cli.py::test_readme_command_runs_as_subprocess",  # 180 s, in order
+    "tests/monitor/test_chain.py",  # 65 s (extended: 100 s)
+    "tests/library/test_uniaxial_machine_tool_flexible_bed.py",  # extended: 57 s
+    "tests/cli/test_model_cli.py::test_demo_monitoring_finds_each_fault",  # extended: 46 s
+    "tests/cli/test_monitor_cli.py",  # 39 s
+    "tests/estimate/test_machine_tool_identification.py",  # extended: 38 s
+    "tests/model/test_reference_derivations.py",  # 36 s
+    "tests/estimate/test_two_step_weighting.py",  # 33 s
+    "tests/test_parallel.py",  # 31 s
+)
 
 
 def work_unit(nodeid: str) -> str:
@@ -46,9 +65,17 @@ def work_unit(nodeid: str) -> str:
     return f"{path}::{name}" if name in SPREAD[path] else nodeid
 
 
+def first_to_front(workqueue: OrderedDict[str, object]) -> None:
+    """Move the first unit of :data:`FIRST` still waiting in ``workqueue`` (xdist's queue of units) to its front."""
+    for unit in FIRST:
+        if unit in workqueue:
+            workqueue.move_to_end(unit, last=False)
+            return
+
+
 @pytest.hookimpl(optionalhook=True)  # a hook of pytest-xdist, absent without it
 def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
-    """``--dist loadgroup`` (``make test``) schedules by :func:`work_unit`.
+    """``--dist loadgroup`` (``make test``) schedules by :func:`work_unit`, the units of :data:`FIRST` first.
 
     pytest-xdist's own loadgroup reads ``xdist_group`` marks by rewriting ``item._nodeid``, which pytest 9 no longer
     reads (the groups were silently ignored), so the groups are made here, from the node ids, by a scheduler of
@@ -61,6 +88,10 @@ def pytest_xdist_make_scheduler(config: pytest.Config, log: object) -> object:
     class FileOrTestScheduling(LoadScopeScheduling):
         def _split_scope(self, nodeid: str) -> str:
             return work_unit(nodeid)
+
+        def _assign_work_unit(self, node: object) -> None:
+            first_to_front(self.workqueue)
+            super()._assign_work_unit(node)  # type: ignore[arg-type]
 
     return FileOrTestScheduling(config, log)  # type: ignore[arg-type]
 
