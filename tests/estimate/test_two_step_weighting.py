@@ -208,3 +208,24 @@ def test_band_limited_two_step_covers_the_truth_on_a_daq_record(two_mass, cls):
     lo, hi = est.ci95.T
     truth = np.array([TRUTH[n] for n in est.names])
     assert np.all((lo <= truth) & (truth <= hi)), dict(zip(est.names, zip(lo, hi, strict=True), strict=True))
+
+
+def test_band_limited_step_one_without_complex_poles_falls_back_and_says_so(two_mass):
+    """An overdamped first mode (c11 = 5000 N s/m, zeta ~1.8: real poles) gives the band-limited step 1 no complex
+    pole pairs to start from: step 1 falls back to the first-order hold's inverse, and the warning (Python and a
+    WARNING line in the text output) says that it is biased."""
+    from cappe.identify import random_noise
+    from cappe.systems import time_response
+
+    nm = NumericModel(two_mass)
+    truth = {"c11": 5000.0}
+    force = random_noise(fs=2000.0, duration=1.0, rms=10.0, rng=1, name="F1")
+    data = time_response(nm.system(truth), force, outputs=["d1", "d2"], intersample="bl")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        est = TwoStepTFEstimator(nm, ["k11", "c11"], values=truth, bounds={"c11": (1.0, 1e4)}, n_starts=2, rng=0,
+                                 intersample="bl").fit(data).estimate_
+    said = "step 1 fell back to the first-order hold's inverse for a band-limited input, which is biased"
+    assert any(str(w.message).startswith(said) for w in caught)
+    assert any(line.startswith(said) and "real or unstable poles" in line for line in est.diagnostics["warnings"])
+    assert est.diagnostics["identification"].startswith("oe (time data), the first-order hold standing in")
