@@ -19,12 +19,15 @@ two-step-tf: a few minutes); ``CAPPE_BENCH_FULL=1`` the full grid (3 simulators 
 10 seeds x 5 methods: hours on a laptop). A part of the grid: ``python -m benchmarks.bench_coverage --methods
 one-step,ekf --simulators daq --noises 0.01,0.05 --inputs 1 --seeds 10 --out coverage_part`` (rows are written to
 ``benchmarks/results/coverage_part.json`` after every case, so a long run that is stopped keeps what it finished).
-``CAPPE_BENCH_TWO_STEP=1`` runs the issue's two-step case (``lsim``, F1 only,
-1 % noise, 10 seeds): one-step against two-step-tf and two-step-zp with the second step weighted by step 1's
-covariance (the default) and unweighted (``weighting="none"``, the method before issue 21), and the weighted ones
-on the DAQ records (step 1's first-order-hold stand-in for a band-limited input is biased there; the chi-square
-test of the second step must say so). Per row also the median and worst error per parameter and how many fits
-passed the second step's chi-square test.
+``CAPPE_BENCH_TWO_STEP=1`` runs the issue's two-step case (F1 only, 10 seeds, results in
+``coverage_two_step.json``): one-step against two-step-tf and two-step-zp on the DAQ records (16x and 64x, 1 % and
+5 % noise; the delayed record at 16x) with step 1 fitted to the band-limited input, and on ``lsim`` records (1 %)
+with the second step weighted by step 1's covariance (the default) and unweighted (``weighting="none"``, the method
+before issue 21). ``CAPPE_BENCH_TWO_STEP=f1f2``: the same three methods with F1 + F2 on the three simulators, 1 %
+and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP_CASES=3,4,5`` runs those cases only (indices into
+the mode's list, results in ``..._part3.json``: parallel processes). Per row also the coverage of the fits that
+claim success, the median and worst error per parameter, how many fits passed the second step's chi-square test,
+and CPU seconds.
 """
 
 from __future__ import annotations
@@ -118,39 +121,70 @@ def settings(method: str, kind: str, inputs: int) -> dict[str, Any]:
     return {"intersample": "foh"}  # ekf: the nearer of its two (zoh, foh) to lsim and DAQ records alike
 
 
-def run_two_step(seeds: range) -> list[dict[str, Any]]:
-    """The issue's repro: F1 only, d1 and d2 with 1 % noise, 7 unknowns, c12 = 0 known."""
+#: The issue's two-step case, F1 only: (method, simulator, noise, oversampling, extra settings). The lsim rows
+#: compare the weighted second step with the unweighted one; the DAQ rows (16x as the issue, 64x where the 16x
+#: record's own error, 1.06e-4 RMS, is one standard error at 1 % noise) run the band-limited step 1.
+TWO_STEP_CASES: tuple[tuple[str, str, float, int, dict[str, Any]], ...] = (
+    *((method, kind, noise, over, {}) for kind, noise, over in (
+        ("daq", 0.01, 16), ("daq", 0.01, 64), ("daq", 0.05, 16), ("daq-delay", 0.01, 16), ("daq-delay", 0.05, 16))
+      for method in ("one-step", "two-step-tf", "two-step-zp")),
+    ("one-step", "lsim", 0.01, OVERSAMPLE, {}), ("two-step-tf", "lsim", 0.01, OVERSAMPLE, {}),
+    ("two-step-tf", "lsim", 0.01, OVERSAMPLE, {"weighting": "none"}), ("two-step-zp", "lsim", 0.01, OVERSAMPLE, {}),
+    ("two-step-zp", "lsim", 0.01, OVERSAMPLE, {"weighting": "none"}),
+)
+
+
+def run_two_step(seeds: range, inputs: int = 1,
+                 cases: tuple[tuple[str, str, float, int, dict[str, Any]], ...] = TWO_STEP_CASES,
+                 out: str | None = None) -> list[dict[str, Any]]:
+    """One-step and the two two-step methods on d1 and d2 (7 unknowns, c12 = 0 known): per case the coverage of
+    every parameter x seed pair and of those of the fits that claim success, the median and worst error per
+    parameter, how many fits passed the second step's chi-square test and how many succeeded."""
     nm = NumericModel(load_model("builtin:two-mass-rig"))
-    cases = [("one-step", "lsim", {}), ("two-step-tf", "lsim", {}), ("two-step-tf", "lsim", {"weighting": "none"}),
-             ("two-step-zp", "lsim", {}), ("two-step-zp", "lsim", {"weighting": "none"}),
-             ("two-step-tf", "daq", {}), ("two-step-zp", "daq", {})]
+    forces = [f"F{j + 1}" for j in range(inputs)]
     rows = []
-    for method, kind, extra in cases:
-        errors, covered, passed, successes = [], 0, 0, 0
-        t0 = time.perf_counter()
+    for method, kind, noise, over, extra in cases:
+        errors, hits, passed, successes, claimed, claimed_hits = [], 0, 0, 0, 0, 0
+        t0, c0 = time.perf_counter(), time.process_time()
         for seed in seeds:
-            data = record(kind, 0.01, seed, 1).select(["F1", "d1", "d2"])
+            data = record(kind, noise, seed, inputs, over).select([*forces, "d1", "d2"])
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                est = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed, **settings(method, kind, 1),
-                                              **extra).fit(data).estimate_
+                est = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
+                                              **settings(method, kind, inputs), **extra).fit(data).estimate_
             errors.append([est.values[k] / TRUTH[n] - 1 for k, n in enumerate(est.names)])
-            covered += sum(bool(np.isfinite(lo) and lo <= TRUTH[n] <= hi)
-                           for n, (lo, hi) in zip(est.names, est.ci95, strict=True))
+            covered = sum(bool(np.isfinite(lo) and lo <= TRUTH[n] <= hi)
+                          for n, (lo, hi) in zip(est.names, est.ci95, strict=True))
+            hits += covered
             passed += bool(est.diagnostics.get("second_step_test", {}).get("passed"))
             successes += bool(est.success)
+            if est.success:
+                claimed += len(est.names)
+                claimed_hits += covered
         err = np.abs(np.array(errors))
-        row = {"method": method, "simulator": kind, "noise": 0.01, "inputs": 1, "seeds": len(seeds),
+        row = {"method": method, "simulator": kind, "oversample": over, "noise": noise, "inputs": inputs,
+               "seeds": len(seeds),
                "weighting": extra.get("weighting", "auto" if method.startswith("two-step") else "-"),
-               "coverage": covered / err.size,
+               "coverage": hits / err.size, "coverage_of_successes": claimed_hits / claimed if claimed else None,
                "worst_relative_error": dict(zip(UNKNOWNS, err.max(axis=0).tolist(), strict=True)),
                "median_relative_error": dict(zip(UNKNOWNS, np.median(err, axis=0).tolist(), strict=True)),
-               "chi2_passed": passed, "successes": successes, "seconds": time.perf_counter() - t0}
+               "chi2_passed": passed, "successes": successes, "seconds": time.perf_counter() - t0,
+               "cpu_seconds": time.process_time() - c0}
         rows.append(row)
-        print(f"{method:>12s} {kind:>5s} weighting {row['weighting']:>5s}  coverage {100 * row['coverage']:5.1f} %  "
+        share = "-" if claimed == 0 else f"{100 * claimed_hits / claimed:5.1f} %"
+        print(f"{method:>12s} {kind:>9s} x{over:<3d} {100 * noise:2.0f} % F1{'+F2' if inputs == 2 else '   '} "
+              f"weighting {row['weighting']:>5s}  coverage {100 * row['coverage']:5.1f} % (of successes {share})  "
               f"worst {100 * err.max():6.2f} % ({UNKNOWNS[int(err.max(axis=0).argmax())]})  chi2 passed "
-              f"{passed}/{len(seeds)}  success {successes}/{len(seeds)}  {row['seconds']:6.1f} s", flush=True)
+              f"{passed}/{len(seeds)}  success {successes}/{len(seeds)}  {row['cpu_seconds']:6.1f} s CPU", flush=True)
+        if out is not None:
+            write_results(out, rows)
     return rows
+
+
+#: F1 + F2 excitation: one-step and the two two-step methods on the three simulators, 1 % and 5 % noise.
+TWO_STEP_BOTH_INPUTS: tuple[tuple[str, str, float, int, dict[str, Any]], ...] = tuple(
+    (method, kind, noise, OVERSAMPLE, {}) for kind in ("daq", "daq-delay", "lsim") for noise in (0.01, 0.05)
+    for method in ("one-step", "two-step-tf", "two-step-zp"))
 
 
 def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, ...], excitations: tuple[int, ...],
@@ -206,8 +240,14 @@ def main() -> None:
 
 
 def _main(args: argparse.Namespace) -> None:
-    if os.environ.get("CAPPE_BENCH_TWO_STEP"):
-        write_results("coverage_two_step", run_two_step(range(10)))
+    two_step = os.environ.get("CAPPE_BENCH_TWO_STEP")
+    if two_step:  # CAPPE_BENCH_TWO_STEP_CASES=3,4,5: a part of the cases (indices), to run in parallel processes
+        inputs, cases, name = ((2, TWO_STEP_BOTH_INPUTS, "coverage_two_step_f1f2") if two_step == "f1f2" else
+                               (1, TWO_STEP_CASES, "coverage_two_step"))
+        part = os.environ.get("CAPPE_BENCH_TWO_STEP_CASES")
+        picked = [int(i) for i in part.split(",")] if part else range(len(cases))
+        run_two_step(range(10), inputs=inputs, cases=tuple(cases[i] for i in picked),
+                     out=name + (f"_part{picked[0]}" if part else ""))
         return
     if any(v is not None for v in (args.methods, args.simulators, args.noises, args.inputs, args.seeds)):
         rows = run(tuple((args.methods or "one-step").split(",")), tuple((args.simulators or "daq").split(",")),
