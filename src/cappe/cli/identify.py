@@ -333,9 +333,8 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
                  ("frac", "csf", "macxp", "ndd")}
         lines.append(f"permuted damping ({len(val.permuted)} reassignments), mean: "
                      + ", ".join(f"{c.upper()} {100 * v:.2f} %" for c, v in means.items()))
-    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
-    if result.cpu_timings:
-        lines.append("CPU time: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.cpu_timings.items()))
+    cpu = f"; CPU: {', '.join(f'{k} {v:.2f} s' for k, v in result.cpu_timings.items())}" if result.cpu_timings else ""
+    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()) + cpu)
     if not estimate.success:
         lines.append(f"not converged: {estimate.message}")
     lines += [f"warning: {w.partition(': ')[2] or w}" for w in result.warnings]
