@@ -26,6 +26,9 @@ chain's wall time, and the warnings the text output showed. Targets (issue 20): 
 DIR/truthN; ``--frf``: ``identify --frf`` with the measured UFF files and without ``--truth``, so that the held-out
 position is validated against its measured FRFs, ``results/real_chain_frf.json``; ``--reuse``: the files a
 ``--keep`` run left in DIR, without generating and extracting again).
+``--seed=K --keep=DIR``: truth K alone, its row in DIR/truthK/row.json (truths side by side in separate processes);
+``--combine=DIR [--frf]`` then writes the result file from those rows. CPU seconds of every command are reported
+beside the wall times (the commands run with one BLAS thread), with the load average at the start and the end.
 ``--compare=DIR`` then measures realized against complex shapes in the final refinement on those files
 (:func:`compare_shapes`, ``results/real_chain_shapes.json``).
 """
@@ -34,6 +37,7 @@ from __future__ import annotations
 
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -117,9 +121,17 @@ def write_sensor_map(path: Path) -> None:
     path.write_text("\n".join(lines) + "\n")
 
 
+def _children_cpu() -> float:
+    """CPU seconds (user + system) of the finished child processes so far."""
+    usage = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return usage.ru_utime + usage.ru_stime
+
+
 def cappe(*argv: str) -> str:
-    """One cappe command as a user runs it (with this checkout's sources first on the path)."""
-    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src")}
+    """One cappe command as a user runs it (with this checkout's sources first on the path), with one BLAS thread
+    (the chain's commands run one after another; its CPU time is what it costs whatever the load)."""
+    env = {**os.environ, "PYTHONPATH": str(Path(__file__).resolve().parents[1] / "src"), "OPENBLAS_NUM_THREADS": "1",
+           "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"}
     done = subprocess.run([sys.executable, "-m", "cappe", *argv], capture_output=True, text=True, env=env,
                           check=False)
     if done.returncode not in (0, 1):
@@ -142,6 +154,8 @@ def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool
     positions = structure.axes[0].positions
     t_gen: float | None = None
     t_extract: float | None = None
+    cpu_extract: list[float] = []
+    load = [os.getloadavg()[0]]
     t0 = time.perf_counter()
     if not reuse:
         (work / "truth.json").write_text(json.dumps(truth))
@@ -152,8 +166,10 @@ def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool
         t_gen = time.perf_counter() - t_gen
         t0 = time.perf_counter()
         for j, z in enumerate(positions):
+            c0 = _children_cpu()
             cappe("extract-modes", str(work / f"z{j + 1}.uff"), "--band", BAND, "--sensor-map",
                   str(work / "map.csv"), "--position", f"z={z}", "-o", str(work / f"z{j + 1}.json"))
+            cpu_extract.append(_children_cpu() - c0)
         t_extract = time.perf_counter() - t0
     extra = ["--n-gsa", "256", "--n-opt", "20"] if quick else []
     if frf:
@@ -162,11 +178,12 @@ def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool
     else:
         extra += ["--truth", str(work / "truth.json")]
     result = work / ("result_frf.json" if frf else "result.json")  # both stay side by side in a kept folder
-    t_identify = time.perf_counter()
+    t_identify, c0 = time.perf_counter(), _children_cpu()
     text = cappe("identify", MODEL, "--reference", *(str(work / f"z{j + 1}.json") for j in range(len(positions))),
                  "--validation", HELD_OUT, "--permutations", "0", "-o", str(result), *extra)
-    t_identify = time.perf_counter() - t_identify
+    t_identify, cpu_identify = time.perf_counter() - t_identify, _children_cpu() - c0
     t_chain = time.perf_counter() - t0
+    load.append(os.getloadavg()[0])
     (work / ("identify_frf.txt" if frf else "identify.txt")).write_text(text)
     doc = json.loads(result.read_text())
     kinds = {n: structure.parameter(n).kind for n in truth}
@@ -185,6 +202,10 @@ def run_truth(seed: int, work: Path, quick: bool, frf: bool = False, reuse: bool
         "negative_lower_bounds": sorted(n for n in truth if ci[n][0] < 0),
         "modes_extracted": n_modes, "generate_s": t_gen, "extract_s": t_extract, "identify_s": t_identify,
         "chain_s": t_chain, "frf": frf,
+        "cpu_extract_s": cpu_extract, "cpu_identify_s": cpu_identify,
+        "cpu_chain_s": (sum(cpu_extract) if cpu_extract else float("nan")) + cpu_identify,
+        "cpu_identify_stages_s": doc["diagnostics"].get("cpu_timings"),
+        "wall_identify_stages_s": doc["diagnostics"].get("timings"), "load_start_end": load,
         "warnings": [line for line in text.splitlines() if "warning" in line.lower()],
         "validation": doc["diagnostics"]["validation"]["validation"]["statistics"],
         "validation_source": doc["diagnostics"]["validation"]["validation"]["frf_source"],
@@ -240,41 +261,58 @@ def main(argv: list[str]) -> dict[str, Any]:
             print(json.dumps(rows[-1]), flush=True)
         write_results("real_chain_shapes", rows)
         return {"runs": rows}
+    frf = "--frf" in argv
+    combine = next((a.split("=", 1)[1] for a in argv if a.startswith("--combine=")), None)
+    if combine is not None:  # the truths that --seed runs left in one folder, as one result file
+        results = [json.loads(p.read_text()) for p in sorted(Path(combine).glob("truth*/row.json"))]
+        summary = summarize(results)
+        print("summary:", json.dumps(summary))
+        write_results("real_chain_frf" if frf else "real_chain", [*results, {"summary": summary}])
+        return {"runs": results, "summary": summary}
     quick = "--quick" in argv
     numbers = [a for a in argv if not a.startswith("-")]
     runs = 1 if quick and not numbers else int(numbers[0]) if numbers else 3
     keep = next((a.split("=", 1)[1] for a in argv if a.startswith("--keep=")), None)
     reuse = next((a.split("=", 1)[1] for a in argv if a.startswith("--reuse=")), None)
-    frf = "--frf" in argv
+    one = next((int(a.split("=", 1)[1]) for a in argv if a.startswith("--seed=")), None)
     results = []
-    for seed in range(runs):
+    for seed in range(runs) if one is None else [one]:
         with tempfile.TemporaryDirectory() as tmp:
             folder = keep if reuse is None else reuse
             work = Path(tmp) if folder is None else Path(folder) / f"truth{seed}"
             work.mkdir(parents=True, exist_ok=True)
             r = run_truth(seed, work, quick, frf=frf, reuse=reuse is not None)
+            if one is not None:
+                (work / "row.json").write_text(json.dumps(r))
         results.append(r)
         print(f"truth {seed}: stiffness worst {r['stiffness_worst_pct']:.2f} % "
               f"median {r['stiffness_median_pct']:.2f} %,"
               f" damping worst {r['damping_worst_pct']:.1f} % median {r['damping_median_pct']:.1f} %, covered "
               f"{r['covered']}/{r['n_unknowns']} (missed {r['not_covered']}), modes {r['modes_extracted']}, "
-              f"identify {r['identify_s']:.0f} s, extract {r['extract_s'] or float('nan'):.0f} s, "
+              f"identify {r['identify_s']:.0f} s, extract {r['extract_s'] or float('nan'):.0f} s (CPU: identify "
+              f"{r['cpu_identify_s']:.0f} s, extract {sum(r['cpu_extract_s']):.0f} s, load {r['load_start_end']}), "
               f"warnings {len(r['warnings'])}, held-out FRAC worst "
               f"{100 * r['validation']['frac']['worst']:.1f} % ({r['validation_source']}), chi2/dof {r['chi2_dof']}")
         for line in r["warnings"]:
             print("   ", line)
-    summary = {
+    summary = summarize(results)
+    print("summary:", json.dumps(summary))
+    if not quick and one is None:
+        write_results("real_chain_frf" if frf else "real_chain", [*results, {"summary": summary}])
+    return {"runs": results, "summary": summary}
+
+
+def summarize(results: list[dict[str, Any]]) -> dict[str, Any]:
+    """Worst and median errors, coverage, and the chain's wall and CPU time over the truths."""
+    return {
         "stiffness_worst_pct": max(r["stiffness_worst_pct"] for r in results),
         "stiffness_median_pct": float(np.median([r["stiffness_median_pct"] for r in results])),
         "damping_worst_pct": max(r["damping_worst_pct"] for r in results),
         "coverage": sum(r["covered"] for r in results) / sum(r["n_unknowns"] for r in results),
         "chain_s_max": max(r["chain_s"] for r in results),
         "identify_s_max": max(r["identify_s"] for r in results),
+        "cpu_chain_s_max": max(r["cpu_chain_s"] for r in results),
     }
-    print("summary:", json.dumps(summary))
-    if not quick:
-        write_results("real_chain_frf" if frf else "real_chain", [*results, {"summary": summary}])
-    return {"runs": results, "summary": summary}
 
 
 if __name__ == "__main__":

@@ -67,6 +67,7 @@ def test_identify_end_to_end(files, capsys):
     assert "validation position: z = -0.2\n" in text  # a position in words, not a Python dict (issue 22)
     assert "worst |error|" in text
     assert "runtime: gsa" in text
+    assert "; CPU: gsa" in text  # CPU seconds per stage: what a stage costs whatever the load
     assert "permuted damping (2 reassignments)" in text
     doc = json.loads(out.read_text())
     assert doc["format"] == "cappe.estimate/1"

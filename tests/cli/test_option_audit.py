@@ -200,7 +200,7 @@ def _sensor_maps(w: Path) -> None:
 def _scrub(value: object) -> object:
     """Drop what changes from run to run by itself: wall-clock times."""
     if isinstance(value, dict):
-        return {k: _scrub(v) for k, v in value.items() if not re.fullmatch(r"timings?|runtime(_s)?|elapsed(_s)?", k)}
+        return {k: _scrub(v) for k, v in value.items() if not re.fullmatch(r"(cpu_)?timings?|runtime(_s)?|elapsed(_s)?", k)}
     if isinstance(value, list):
         return [_scrub(v) for v in value]
     return value

@@ -501,9 +501,10 @@ def test_run_options_are_fit_arguments_and_the_old_settings_still_work(bench, sm
 
 
 def _untimed(doc):
-    """A result document without its run times (``timings``, ``seconds``), the only entries that vary run to run."""
+    """A result document without its run times (``timings``, ``cpu_timings``, ``seconds``), the only entries that
+    vary run to run."""
     if isinstance(doc, dict):
-        return {k: _untimed(v) for k, v in doc.items() if k not in ("timings", "seconds")}
+        return {k: _untimed(v) for k, v in doc.items() if k not in ("timings", "cpu_timings", "seconds")}
     if isinstance(doc, list):
         return [_untimed(v) for v in doc]
     return doc

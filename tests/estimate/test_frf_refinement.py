@@ -116,8 +116,13 @@ def test_frf_refinement_brings_damping_within_target(chain, tmp_path, capsys):
     assert max(_damping_errors(modal_only).values()) > 0.25, _damping_errors(modal_only)
 
     frf = [str(chain / f"z{k}.uff") for k in range(3)]
-    code, doc, _ = _identify(chain, tmp_path, "--frf", *frf)
+    code, doc, _ = _identify(chain, tmp_path, "--frf", *frf, "--report", str(tmp_path / "r.html"))
     out = capsys.readouterr()
+    # the report's run record names every file the run read: the reference files one by one, the FRFs, the map
+    page = (tmp_path / "r.html").read_text()
+    assert f"<td class=\"name\">measured FRFs</td><td>{', '.join(frf)}</td>" in page
+    assert f"<td class=\"name\">sensor map</td><td>{chain / 'map.csv'}</td>" in page
+    assert f"{MODEL}, {chain / 'z0.json'}, {chain / 'z1.json'}" in page
     assert code == 0, out.err
     damping = _damping_errors(doc)
     assert max(damping.values()) < 0.05, damping  # 2 % noise on 2 positions x 18 x 3 FRFs: about 1 % or better

@@ -36,9 +36,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--reference-side", choices=["auto", "inputs", "outputs"], default="auto",
                    help="references of the estimator: the measured inputs, or the outputs by reciprocity (roving "
                         "hammer: shapes at the hammer points); auto (default) takes the side with fewer channels")
-    p.add_argument("--bootstrap", type=int, default=30, metavar="N",
-                   help="bootstrap replicates for the standard deviations of frequency, damping and shapes "
-                        "(default 30; 0 skips them)")
+    p.add_argument("--bootstrap", type=int, default=10, metavar="N",
+                   help="bootstrap replicates for the standard deviations of frequency, damping and shapes, widened "
+                        "by t_0.975(N)/1.96 for their number (default 10; 0 skips them)")
     p.add_argument("--sensor-map", metavar="MAP.csv",
                    help="CSV 'channel,sensor' naming the model sensor channel of each measured channel (e.g. "
                         "5:-z,table_fl:z); a negative measured direction is flipped to the model's positive one; "

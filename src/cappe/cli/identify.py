@@ -271,8 +271,7 @@ def run(args: argparse.Namespace) -> int:
         from cappe.report.html import write_html_report
 
         write_html_report(args.report, result=result, truth=truth, title=f"{structure.name}: automated identification",
-                          model=structure, run={"command": "cappe " + " ".join(sys.argv[1:]), "seed": args.seed,
-                                                "input files": [args.model, args.reference]})
+                          model=structure, run=_run_record(args))
         doc["diagnostics"]["report"] = args.report
     text = summary_text(result, truth, structure.name)
     if args.report:
@@ -334,11 +333,23 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
                  ("frac", "csf", "macxp", "ndd")}
         lines.append(f"permuted damping ({len(val.permuted)} reassignments), mean: "
                      + ", ".join(f"{c.upper()} {100 * v:.2f} %" for c, v in means.items()))
-    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()))
+    cpu = f"; CPU: {', '.join(f'{k} {v:.2f} s' for k, v in result.cpu_timings.items())}" if result.cpu_timings else ""
+    lines.append("runtime: " + ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items()) + cpu)
     if not estimate.success:
         lines.append(f"not converged: {estimate.message}")
     lines += [f"warning: {w.partition(': ')[2] or w}" for w in result.warnings]
     return "\n".join(lines)
+
+
+def _run_record(args: argparse.Namespace) -> dict[str, Any]:
+    """What the report's run section names: the command, the seed and every file the run read."""
+    run: dict[str, Any] = {"command": "cappe " + " ".join(sys.argv[1:]), "seed": args.seed,
+                           "input files": [args.model, *args.reference]}
+    for key, value in (("measured FRFs", args.frf), ("sensor map", args.sensor_map), ("truth", args.truth),
+                       ("known parameters", args.params)):
+        if value:
+            run[key] = value
+    return run
 
 
 def _where(position: Any, missing: str = "-") -> str:

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import functools
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -442,6 +442,9 @@ class AutomatedResult:
     frf : FRFRefinement or None
         The refinement against measured FRFs at the identification positions (after the joint refinement), when
         they were given: its estimate is then the final one.
+    cpu_timings : mapping step -> float
+        CPU seconds of this process per step and ``total`` (every thread of the process counted: with one BLAS
+        thread the work a step costs, whatever the load of the machine).
     """
 
     method: str
@@ -461,6 +464,7 @@ class AutomatedResult:
     timings: Mapping[str, float]
     warnings: tuple[str, ...]
     frf: FRFRefinement | None = None
+    cpu_timings: Mapping[str, float] = field(default_factory=dict)
 
     @property
     def costs(self) -> dict[str, float | None]:
@@ -496,6 +500,7 @@ class AutomatedResult:
             "frf_refinement": None if self.frf is None else self.frf.to_dict(),
             "costs": self.costs,
             "timings": dict(self.timings),
+            "cpu_timings": dict(self.cpu_timings),
             "validation": self.validation.to_dict(),
             "warnings": list(self.warnings),
         }
