@@ -381,7 +381,8 @@ CASES = [
                             ("--frf", ["--frf", "{w}/ref_frf.uff"]))],
     *[_case("simulate", option, ["simulate", CAR, "--json", "--frf", "{w}/ref_frf.uff"], extra)
       for option, extra in (("--driving-points", ["--driving-points", "s2:x"]),
-                            ("--frf-outputs", ["--frf-outputs", "s1:x"]), ("--lines", ["--lines", "11"]))],
+                            ("--frf-outputs", ["--frf-outputs", "s1:x"]), ("--lines", ["--lines", "11"]),
+                            ("--noise-frf", ["--noise-frf", "0.02"]))],
     _case("simulate", "--disturb", ["simulate", "builtin:spindle-bearing", "--modes", "3", "--json"],
           ["--disturb", "0.1"]),
     # -- frf, fit, extract-modes ----------------------------------------------------------------------------------

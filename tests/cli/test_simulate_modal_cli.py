@@ -147,7 +147,7 @@ def test_frf_band_defaults_and_model_outputs(capsys, files, tmp_path):
     code, out, err = simulate(capsys, files, "--frf", frf_file, "--frf-outputs", "d,tip", "--json")
     assert code == 0, err
     summary = json.loads(out)
-    assert summary["files"]["frf"] == [{"path": str(frf_file), "position": {"z": -0.2}}]  # one position: as named
+    assert summary["files"]["frf"] == [{"path": str(frf_file), "position": {"z": -0.2}, "noise": 0.0}]  # as named
     frf = read_frf(frf_file)
     assert frf.input_names == ("F",)  # default: every model input
     assert frf.output_names == ("d", "tip:x", "tip:y", "tip:z")
@@ -157,6 +157,30 @@ def test_frf_band_defaults_and_model_outputs(capsys, files, tmp_path):
     assert frf.freq[-1] == float(f"{1.25 * summary['sets'][0]['frequency_range'][1]:.3g}")
     # model output d and sensor channel tip:x are the same point and direction
     np.testing.assert_allclose(frf.H[0], frf.H[1], rtol=1e-12)
+
+
+def test_frf_noise_rehearses_a_modal_test(capsys, files, tmp_path):
+    """--noise-frf: H (1 + REL e), e complex standard normal per line and channel, on sensor channels that are not
+    model outputs; the modes and the exact FRFs of the same seed do not change."""
+    common = ("--frf-outputs", "tip,foot:x", "--driving-points", "tip:x", "--lines", "2001", "--seed", "7")
+    exact_file, noisy_file = tmp_path / "exact.npz", tmp_path / "noisy.npz"
+    assert simulate(capsys, files, "--frf", exact_file, *common, "-o", tmp_path / "a.json")[0] == 0
+    code, out, err = simulate(capsys, files, "--frf", noisy_file, *common, "--noise-frf", "0.02",
+                              "-o", tmp_path / "b.json")
+    assert code == 0, err
+    assert "relative complex noise 0.02)" in out
+    exact, noisy = read_frf(exact_file), read_frf(noisy_file)
+    assert noisy.output_names == ("tip:x", "tip:y", "tip:z", "foot:x")
+    live = np.abs(exact.H) > 0  # a channel the driving point cannot move has H = 0 exactly
+    relative = (noisy.H[live] / exact.H[live] - 1.0) * np.sqrt(2.0)
+    assert relative.size > 4000
+    # real and imaginary parts each N(0, 0.02^2), independent: std within 5 % of 0.02 at n > 4000, no mean
+    for part in (relative.real, relative.imag):
+        assert abs(np.std(part) / 0.02 - 1.0) < 0.05
+        assert abs(np.mean(part)) < 4 * 0.02 / np.sqrt(part.size)
+    assert abs(np.corrcoef(relative.real, relative.imag)[0, 1]) < 0.05
+    assert read_modal_data(tmp_path / "a.json").sets[0].frequency.tolist() == \
+        read_modal_data(tmp_path / "b.json").sets[0].frequency.tolist()
 
 
 @pytest.mark.parametrize(
@@ -173,6 +197,9 @@ def test_frf_band_defaults_and_model_outputs(capsys, files, tmp_path):
         (["--modes", "0"], 1, "n_modes must be a positive integer or None (all modes); got 0"),
         (["--noise-damping", "-0.1"], 1, "noise_damping must be a finite number >= 0"),
         (["--driving-points", "F"], 2, "--driving-points sets up the simulated FRFs; give --frf FILE as well"),
+        (["--noise-frf", "0.02"], 2, "--noise-frf sets up the simulated FRFs; give --frf FILE as well"),
+        (["--frf", "x.npz", "--noise-frf", "2"], 2, "--noise-frf must be a relative level in [0, 1] (0.02 = 2 %); "
+                                                   "got 2"),
         (["--band", "0:100"], 2, "--band sets up the simulated FRFs; give --frf FILE as well"),
         (["--frf", "f.uff", "--lines", "1"], 2, "--lines must be an integer >= 2; got 1"),
         (["--frf", "f.uff", "--band", "5"], 2, "--band must look like LO:HI"),

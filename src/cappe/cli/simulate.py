@@ -3,10 +3,11 @@
 * ``cappe simulate MODEL --excite INPUT=SIGNAL ...``: time data (inputs and responses with seeded noise).
 * ``cappe simulate MODEL [--params truth.json] [--positions all|AXIS=V,...] [--modes N] [--noise-frequency ...]
   [--noise-damping ...] [--noise-shape ...] [--sensors LIST] [--seed N] -o ref.json [--uff modes.uff] [--frf frf.uff
-  --driving-points IN,... --band LO:HI --lines N]``: reference modal data (cappe.modal/1) at the model's sensor
-  nodes, the exact modes of the true parameters (nominal values for parameters the file leaves out) tracked
-  across axis positions, with seeded noise; optionally as UFF 55 with the sensor nodes' global coordinates at the
-  first position (UFF 2411), and exact FRFs (no noise) from driving points to every sensor channel.
+  --driving-points IN,... --band LO:HI --lines N --noise-frf REL]``: reference modal data (cappe.modal/1) at the
+  model's sensor nodes, the exact modes of the true parameters (nominal values for parameters the file leaves
+  out) tracked across axis positions, with seeded noise; optionally as UFF 55 with the sensor nodes' global
+  coordinates at the first position (UFF 2411), and FRFs from driving points to every sensor channel (exact, or
+  with seeded relative complex noise: a rehearsal of a modal test).
 
 ``--modes`` larger than the number of oscillatory modes of the model is an error (exit 1).
 """
@@ -17,6 +18,7 @@ import argparse
 import itertools
 import math
 from collections.abc import Sequence
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -33,7 +35,7 @@ MODAL_OPTIONS = {
     "positions": "--positions", "modes": "--modes", "noise_frequency": "--noise-frequency",
     "noise_damping": "--noise-damping", "noise_shape": "--noise-shape", "uff": "--uff", "frf": "--frf",
     "driving_points": "--driving-points", "frf_outputs": "--frf-outputs", "lines": "--lines",
-    "sensors": "--sensors",
+    "noise_frf": "--noise-frf", "sensors": "--sensors",
 }
 #: Default number of FRF lines and the default top of the FRF band relative to the highest reference mode.
 DEFAULT_LINES, BAND_MARGIN = 801, 1.25
@@ -100,6 +102,9 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                        help="FRF responses: model outputs, sensor channels or nodes (default every sensor channel)")
     modal.add_argument("--lines", type=int, metavar="N",
                        help=f"FRF frequency lines in --band (default {DEFAULT_LINES})")
+    modal.add_argument("--noise-frf", type=float, metavar="REL",
+                       help="FRF noise: H * (1 + REL * complex N(0,1)) on every line, independent per line and "
+                            "channel, e.g. 0.02 (default 0: exact FRFs)")
     p.set_defaults(func=run)
 
 
@@ -290,13 +295,17 @@ def _run_modal(args: argparse.Namespace) -> int:
 
     if args.frf is None:
         stray = [flag for dest, flag in (("driving_points", "--driving-points"), ("frf_outputs", "--frf-outputs"),
-                                         ("lines", "--lines"), ("band", "--band")) if getattr(args, dest) is not None]
+                                         ("lines", "--lines"), ("band", "--band"), ("noise_frf", "--noise-frf"))
+                 if getattr(args, dest) is not None]
         if stray:
             verb = "sets" if len(stray) == 1 else "set"
             msg = f"{', '.join(stray)} {verb} up the simulated FRFs; give --frf FILE as well"
             raise UsageError(msg)
     if args.lines is not None and args.lines < 2:
         msg = f"--lines must be an integer >= 2; got {args.lines}"
+        raise UsageError(msg)
+    if args.noise_frf is not None and not (np.isfinite(args.noise_frf) and 0.0 <= args.noise_frf <= 1.0):
+        msg = f"--noise-frf must be a relative level in [0, 1] (0.02 = 2 %); got {args.noise_frf:g}"
         raise UsageError(msg)
     ctx = _context(args)
     model = ctx.numeric
@@ -312,9 +321,14 @@ def _run_modal(args: argparse.Namespace) -> int:
         top = BAND_MARGIN * max(float(np.max(s.frequency)) for s in ref.sets)
         lo, hi = band(args.band) if args.band else (0.0, float(f"{top:.3g}"))
         freq = np.linspace(lo, hi, args.lines or DEFAULT_LINES)
+        # a stream of its own: adding --noise-frf leaves the modal noise and --disturb of the same seed unchanged
+        frf_rng = np.random.default_rng([args.seed, 5])
         for position in sets:
             frf = reference_frf(model, freq=freq, params=ctx.values, position=position,
                                 inputs=names(args.driving_points), outputs=names(args.frf_outputs))
+            if args.noise_frf:
+                relative = frf_rng.standard_normal(frf.H.shape) + 1j * frf_rng.standard_normal(frf.H.shape)
+                frf = replace(frf, H=frf.H * (1.0 + args.noise_frf * relative / np.sqrt(2.0)))
             frfs.append((_frf_path(args.frf, position, len(sets) > 1), position, frf))
 
     files: dict[str, Any] = {}
@@ -344,11 +358,12 @@ def _run_modal(args: argparse.Namespace) -> int:
         files["frf"] = []
         for path, position, frf in frfs:
             write_frf(path, frf)
-            files["frf"].append({"path": str(path), "position": position})
+            files["frf"].append({"path": str(path), "position": position, "noise": args.noise_frf or 0.0})
             lines.append(
                 f"wrote {path} ({len(frf.output_names)} responses x {len(frf.input_names)} driving points "
                 f"({', '.join(frf.input_names)}), {frf.freq.size} lines {frf.freq[0]:g}-{frf.freq[-1]:g} Hz, "
-                f"{_label(position)})"
+                f"{_label(position)}, " + (f"relative complex noise {args.noise_frf:g})" if args.noise_frf
+                                           else "exact)")
             )
     summary = {
         "model": ctx.structure.name,
