@@ -12,7 +12,7 @@ by ``SENSOR_LAG`` minutes, log-normal FRF errors; numpy physics of its own), the
 The target of issue 25: detected within 5 measurements at <= 0.1 % false alarms per measurement over >= 1000.
 
 ``python -m benchmarks.bench_small_change [exact|mismatch] [SENSOR_LAG]`` writes
-``benchmarks/results/small_change_<case>.json``.
+``benchmarks/results/small_change_<case>.json`` (``small_change_<case>_lag<SENSOR_LAG>.json`` for another lag).
 """
 
 from __future__ import annotations
@@ -91,7 +91,8 @@ def main() -> None:
               f"measurements ({skipped} not judged); wall {summary['wall_s']:.0f} s, cpu {summary['cpu_s']:.0f} s")
         for k, a in raised:
             print(f"  false alarm at {healthy[k].timestamp:%a %H:%M}: {a.message[:120]}")
-        print(f"wrote {write_results(f'small_change_{case}', [summary, *rows])}")
+        name = f"small_change_{case}" if lag == SENSOR_LAG else f"small_change_{case}_lag{lag:g}"
+        print(f"wrote {write_results(name, [summary, *rows])}")
 
 
 if __name__ == "__main__":

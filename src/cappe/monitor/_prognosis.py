@@ -15,11 +15,12 @@ distribution is skewed. Where the slope is not significant at that level the set
 tell when, and the forecast says so instead of giving a number.
 
 The monitor's change sizes also carry a systematic error proportional to the change (the fit's nonlinearity and
-the model's error: 0.36 % of the change on the exact spindle model, up to 2.4 % with its masses 3 % off), which
-the scatter about the line cannot show and which shifts the whole line: with ``scale_std``, the interval is the
-hull of the Fieller intervals for the thresholds ``c / (1 -+ z scale_std)`` (``z`` the normal quantile of the
-level), so that a true change ``(1 + e)`` times smaller or larger than estimated is covered for ``|e| <= z
-scale_std``.
+the model's error: up to about 1 % of the change on the exact spindle model, 1 to 8 % with its masses 3 % off),
+which the scatter about the line cannot show and which shifts the whole line; the monitor passes the baseline's
+estimate of it (:attr:`cappe.monitor.Baseline.size_scale_std`, from the model's offset from the healthy machine).
+With ``scale_std``, the interval is the hull of the Fieller intervals for the thresholds ``c / (1 -+ z scale_std)``
+(``z`` the normal quantile of the level), so that a true change ``(1 + e)`` times smaller or larger than estimated
+is covered for ``|e| <= z scale_std``.
 """
 
 from __future__ import annotations
