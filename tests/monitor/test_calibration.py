@@ -107,3 +107,21 @@ def test_2_percent_loss_and_1000_healthy_measurements(chain) -> None:
     _, raised, skipped = detect(monitor, baseline, healthy)
     assert len(raised) <= 0.001 * (len(healthy) - skipped), [a.message for _, a in raised]
     assert skipped < 100
+
+
+def test_the_forecasts_scale_term_adds_in_quadrature() -> None:
+    # the scatter and the scale error of the sizes are independent: each side of Fieller's interval is widened in
+    # quadrature by z scale_std |c / b| (old: the hull of the intervals at shifted thresholds, the two quantiles
+    # added: 80 of 80 at a stated 95 % on the exact model)
+    from scipy.stats import norm
+
+    from cappe.monitor import forecast_crossing
+
+    t = np.arange(13) * 0.25
+    y = -0.02 * t + 0.0005 * np.cos(5 * t)
+    plain = forecast_crossing(t, y, -0.25)
+    wide = forecast_crossing(t, y, -0.25, scale_std=0.01)
+    shift = norm.ppf(0.975) * 0.01 * 0.25 / abs(plain.slope)
+    assert wide.time == pytest.approx(plain.time)
+    assert wide.time - wide.lower == pytest.approx(np.hypot(plain.time - plain.lower, shift), rel=1e-9)
+    assert wide.upper - wide.time == pytest.approx(np.hypot(plain.upper - plain.time, shift), rel=1e-9)
