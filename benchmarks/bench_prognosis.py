@@ -6,9 +6,14 @@ a random time of day. At ``AT`` measurements after the first alarm, :func:`cappe
 extrapolates the screw's changes since that alarm to the intolerable grade (-25 %); the truth is the time the
 simulated stiffness reaches 75 %. Reported: the coverage of the 95 % intervals (counting "cannot be told" as
 covering, and how often that was said), their median width and the median error of the point forecast, and the
-coverage of the intervals from the scatter alone (without the scale uncertainty ``SIZE_SCALE_STD``).
+coverage of the intervals from the scatter alone (without the scale uncertainty, the baseline's ``size_scale_std``).
 
-``python -m benchmarks.bench_prognosis [N_SEQUENCES]`` writes ``benchmarks/results/prognosis.json``.
+The data come from cappe's scenario simulator (``scenario``, the default) or from the independent generator
+:class:`benchmarks._spindle_generator.ShopFloor` (numpy physics of its own, cold starts and warm-up) with the exact
+model (``exact``) or a machine 3 % heavier and 30 % more damped than its model (``mismatch``).
+
+``python -m benchmarks.bench_prognosis [N_SEQUENCES] [scenario|exact|mismatch]`` writes
+``benchmarks/results/prognosis.json`` (scenario) or ``prognosis_<case>.json``.
 """
 
 from __future__ import annotations
@@ -22,7 +27,6 @@ import numpy as np
 from benchmarks._common import write_results
 from cappe.model import NumericModel, load_model
 from cappe.monitor import Monitor, default_config, forecast_crossing, simulate_scenario
-from cappe.monitor._chain import SIZE_SCALE_STD
 from cappe.parallel import blas_threads
 
 OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
@@ -38,24 +42,39 @@ def main() -> None:
 
 def _main() -> None:
     n_seq = int(sys.argv[1]) if len(sys.argv) > 1 else 200
-    model = NumericModel(load_model("builtin:spindle-bearing"))
-    config = default_config(model, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
-    monitor = Monitor(config, model)
-    day = simulate_scenario(config, "healthy", n=96, model=model, rng=1, start=START)
-    baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
-                                      conditions=[m.conditions for m in day])
+    case = sys.argv[2] if len(sys.argv) > 2 else "scenario"
     n = 40  # measurements per sequence: 4 healthy, then the screw loosens by RATE per measurement
+    if case == "scenario":
+        model = NumericModel(load_model("builtin:spindle-bearing"))
+        config = default_config(model, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
+                                band=(150.0, 1000.0))
+        monitor = Monitor(config, model)
+        day = simulate_scenario(config, "healthy", n=96, model=model, rng=1, start=START)
+        baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
+                                          conditions=[m.conditions for m in day])
+
+        def sequence(seq: int) -> list:
+            start = START + timedelta(days=1, hours=float(np.random.default_rng(900 + seq).uniform(0, 24)))
+            return simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component="screw3",
+                                     severity=RATE * (n - 1 - 4), model=model, rng=1000 + seq, start=start)
+    else:
+        from benchmarks.bench_calibration import setup
+
+        monitor, floor, baseline = setup(case, seed=4)
+
+        def sequence(seq: int) -> list:
+            return floor.run(n, fault="screw3", loss=RATE * np.clip(np.arange(n) - 4, 0, None), fault_at=4)
+    scale_std = baseline.size_scale_std
     covered, undetermined, widths, errors = [], 0, [], []
     covered_scatter_only = []
     for seq in range(n_seq):
-        start = START + timedelta(days=1, hours=float(np.random.default_rng(900 + seq).uniform(0, 24)))
-        data = simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component="screw3",
-                                 severity=RATE * (n - 1 - 4), model=model, rng=1000 + seq, start=start)
+        data = sequence(seq)
         state = None
         first = None
         times, changes = [], []
         for k, m in enumerate(data):
+            if baseline.judge(m.conditions)[0]:
+                continue
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
                 analysis = monitor.analyse(m.frf, baseline=baseline, modal=False)
@@ -69,7 +88,7 @@ def _main() -> None:
                 break
         if first is None or len(times) < 3:
             continue
-        forecast = forecast_crossing(times, changes, -0.25, scale_std=SIZE_SCALE_STD)
+        forecast = forecast_crossing(times, changes, -0.25, scale_std=scale_std)
         truth = 0.25 * (4 + 0.25 / RATE)  # factor 1 - RATE (k - 4) reaches 0.75
         covered.append(forecast.covers(truth))
         covered_scatter_only.append(forecast_crossing(times, changes, -0.25).covers(truth))
@@ -82,7 +101,7 @@ def _main() -> None:
                   f"coverage so far {sum(covered)}/{len(covered)} (scatter only {sum(covered_scatter_only)})",
                   flush=True)
     rate = float(np.mean(covered))
-    row = {"sequences": len(covered), "coverage_95": rate, "scale_std": SIZE_SCALE_STD,
+    row = {"case": case, "sequences": len(covered), "coverage_95": rate, "scale_std": scale_std,
            "coverage_95_scatter_only": float(np.mean(covered_scatter_only)),
            "coverage_binomial_se": float(np.sqrt(0.95 * 0.05 / len(covered))),
            "undetermined": undetermined, "median_width_h": float(np.median(widths)),
@@ -90,7 +109,7 @@ def _main() -> None:
     print(f"coverage {100 * rate:.1f} % of {len(covered)} (95 % stated; scatter only "
           f"{100 * row['coverage_95_scatter_only']:.1f} %), {undetermined} undetermined, median width "
           f"{row['median_width_h']:.2f} h, median error {row['median_error_h']:+.2f} h")
-    print(f"wrote {write_results('prognosis', [row])}")
+    print(f"wrote {write_results('prognosis' if case == 'scenario' else f'prognosis_{case}', [row])}")
 
 
 if __name__ == "__main__":

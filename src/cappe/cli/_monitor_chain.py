@@ -619,6 +619,11 @@ def status(args: argparse.Namespace) -> int:
             lines.append(f"  detectable: a change of {sizes} is found after about {det['measurements']:.2g} "
                          f"measurement(s) ({det['shift']:g} standard deviations of the healthy scatter, resolution "
                          f"{100 * det['resolution']:.2g} %); smaller changes take longer")
+            if det.get("size_scale_std") is not None:
+                lines.append(f"  sizes: a diagnosed change's size is uncertain by +- "
+                             f"{100 * det['size_scale_std']:.2g} % of itself beyond the scatter (the healthy machine "
+                             f"is {100 * det['model_offset']:.2g} % from its model, RMS over the components: its "
+                             "sensitivities are about that far off)")
         lines += [f"  forecast {name}: {f['text']}" for name, f in d["forecasts"].items()]
         lines += [f"  note: {text}" for text in d["limitations"]]
         if d["latest"] and d["latest"].get("meta", {}).get("not_judged"):

@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, load_model
-from cappe.monitor._baseline import LEARNED_MARGIN, Baseline, learn_baseline
+from cappe.monitor._baseline import LEARNED_MARGIN, SIZE_SCALE_FLOOR, Baseline, learn_baseline
 from cappe.monitor._config import MonitorConfig, severity_rank, worst_severity
 from cappe.monitor._detection import ChartSignal, SequentialDetector
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
@@ -64,11 +64,6 @@ MAP_MODES = (1, 2, 3)
 
 #: Standard uncertainties by which a change must pass a worse grade's threshold before the alarm escalates.
 ESCALATION_Z = 3.0
-
-#: Relative standard uncertainty of the scale of the chain's change sizes, for forecasts: the worst size error seen
-#: under model mismatch (2.4 % with the masses 3 % off, issue 25) taken as two standard deviations; the exact model
-#: shows 0.36 % (tests/monitor/test_prognosis.py).
-SIZE_SCALE_STD = 0.012
 
 #: What output-only records cannot tell, said wherever such a machine's results are shown.
 OUTPUT_ONLY_LIMITATIONS = (
@@ -658,9 +653,9 @@ class Monitor:
         for signal in signals:
             # which fault: from the mean change since the change point (averages the noise of the run); how
             # large: from this measurement's deviation along that fault (a drifting fault has grown since)
-            chosen = diagnose(signal.change, baseline.diagnosis_covariance / signal.change_weight,
+            chosen = diagnose(signal.change, baseline.size_covariance(signal.change, signal.change_weight),
                               list(hyps.values()))
-            now = diagnose(deviation, baseline.diagnosis_covariance, [hyps[chosen.hypothesis]])
+            now = diagnose(deviation, baseline.size_covariance(deviation), [hyps[chosen.hypothesis]])
             diagnosis = replace(chosen, change=now.change, change_std=now.change_std, severity=now.severity)
             held = best.get(diagnosis.hypothesis)
             if held is None or signal.statistic > held[0].statistic:
@@ -846,7 +841,9 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
     -------
     dict
         ``change``: component -> the relative change of ``shift`` chart standard deviations; ``measurements``:
-        the average number of measurements to find it; ``resolution``: the baseline's resolution; ``shift``.
+        the average number of measurements to find it; ``resolution``: the baseline's resolution; ``shift``;
+        ``size_scale_std``: the relative standard uncertainty of a diagnosed change's size beyond the scatter
+        (:attr:`Baseline.size_scale_std`); ``model_offset``: how far the healthy machine is from its model.
     """
     detector = SequentialDetector(baseline.names, baseline.scale, method=config.detection,
                                   false_alarm_rate=config.false_alarm_rate, shift=config.shift,
@@ -855,7 +852,7 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
     return {"change": {n: float(-np.expm1(-config.shift * s)) for n, s in zip(baseline.names, baseline.scale,
                                                                             strict=True)},
             "measurements": float(design["arl_at_shift"]), "resolution": baseline.resolution,
-            "shift": config.shift}
+            "shift": config.shift, "size_scale_std": baseline.size_scale_std, "model_offset": baseline.model_offset}
 
 
 def file_digest(path: str | Path) -> str:
@@ -1037,7 +1034,8 @@ def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95)
 
     The relative changes from healthy recorded for the component (the ``deviation`` estimates) from the
     measurement of its first unacknowledged alarm on are extrapolated linearly (:func:`forecast_crossing`, a
-    Fieller interval widened for a systematic scale error of :data:`SIZE_SCALE_STD`); times are hours from the
+    Fieller interval widened for the systematic scale error of the sizes, the baseline's
+    :attr:`~cappe.monitor._baseline.Baseline.size_scale_std`); times are hours from the
     latest of them.
 
     Parameters
@@ -1075,5 +1073,6 @@ def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95)
     hours = np.array([(s - latest).total_seconds() / 3600.0 for s in stamps])
     change = table["value"].to_numpy(dtype=float)
     limit = config.thresholds(fault).intolerable
-    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level,
-                             scale_std=SIZE_SCALE_STD)
+    doc = store.baseline(machine)
+    scale_std = Baseline.from_dict(doc).size_scale_std if doc else SIZE_SCALE_FLOOR
+    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level, scale_std=scale_std)
