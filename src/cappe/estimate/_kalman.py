@@ -876,8 +876,12 @@ class _KalmanEstimator(Estimator):
                        f"the last changed the estimate by {largest:.2g} (internal coordinates), more than "
                        f"tol = {self.tol:g} and a quarter of its standard error")
         if finite and refinement is not None:
-            message += (f"; {'then ' if refined else ''}{refinement['steps']} output-error Gauss-Newton steps"
-                        f"{' converged' if refined else ' did not converge'}")
+            steps = int(refinement["steps"])
+            if refined and steps == 0:
+                message += "; the output-error optimum lies within a tenth of a standard error (no Gauss-Newton step)"
+            else:
+                message += (f"; {'then ' if refined else ''}{steps} output-error Gauss-Newton step"
+                            f"{'' if steps == 1 else 's'}{' converged' if refined else ' did not converge'}")
         lo, hi = space.internal_bounds()
         at_bound = [n for n, t, a, b in zip(space.names, theta, lo, hi, strict=True)
                     if finite and (np.isclose(t, a) or np.isclose(t, b))]
