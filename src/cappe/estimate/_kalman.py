@@ -799,7 +799,7 @@ class _KalmanEstimator(Estimator):
                   "cost_before": start_cost, "cost_after": cost,
                   "moved": space.mapping(space.from_internal(theta) - space.from_internal(start_theta)),
                   "filter_estimate": space.mapping(space.from_internal(start_theta))}
-        return theta, cov_u, info, newton, errors, record
+        return theta, cov_u, info, step[:nt], errors, record  # the step left, with the initial state's prior
 
     @abstractmethod
     def _run(self, aug: _Augmented, z0: Array, p0: Array, q: Array, r: Array, w: Array, y: Array) -> _Pass:
