@@ -28,6 +28,8 @@ and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP_CASES=3,4,5`` 
 the mode's list, results in ``..._part3.json``: parallel processes). Per row also the coverage of the fits that
 claim success, the median and worst error per parameter, how many fits passed the second step's chi-square test,
 and CPU seconds.
+``--false-alarm 100`` measures how often direct's force-independence test warns on records whose force and noise
+are independent (100 records per setting, four settings; a few minutes).
 """
 
 from __future__ import annotations
@@ -187,6 +189,53 @@ TWO_STEP_BOTH_INPUTS: tuple[tuple[str, str, float, int, dict[str, Any]], ...] = 
     for method in ("one-step", "two-step-tf", "two-step-zp"))
 
 
+#: Records of the false-alarm measurement of direct's force-independence test: (simulator, noise, inputs, first seed).
+#: The 5 % records have their own seeds (they would otherwise repeat the 1 % ones' draws, scaled); the F1 + F2 and
+#: DAQ records draw different forces and noise from the same seeds.
+FALSE_ALARM_SETTINGS = (("lsim", 0.01, 1, 0), ("lsim", 0.05, 1, 100), ("lsim", 0.01, 2, 0), ("daq", 0.01, 1, 0))
+
+
+def run_false_alarm(records: int) -> list[dict[str, Any]]:
+    """How often direct's force-independence test warns where force and noise are independent.
+
+    Every record here satisfies the equations of motion at its samples (lsim and the non-delayed DAQ record: the
+    anti-alias filter is the same linear filter on every channel), and its noise is drawn independently of the
+    force, so every warning that the equation errors correlate with a force is a false alarm. The test's stated
+    level is 1 % (Bonferroni over the lags and the DOF x force pairs, :mod:`cappe.identify._residual_analysis`).
+    Per setting: records warned, the rate and its 95 % Clopper-Pearson interval, and the smallest p-values.
+    """
+    from scipy import stats
+
+    nm = NumericModel(load_model("builtin:two-mass-rig"))
+    rows = []
+    for kind, noise, inputs, first in FALSE_ALARM_SETTINGS:
+        flagged, smallest = 0, []
+        t0, c0 = time.perf_counter(), time.process_time()
+        for seed in range(first, first + records):
+            data = record(kind, noise, seed, inputs)
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est = estimator_class("direct")(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
+                                                **settings("direct", kind, inputs)).fit(data).estimate_
+            analysis = est.diagnostics["residual_analysis"]
+            pairs = [p for row in analysis["independence_p"].values() for p in row.values()]
+            smallest.append(min(pairs) * len(pairs))  # the Bonferroni p of the whole test
+            flagged += any("correlate with input" in w for w in est.diagnostics.get("warnings", []))
+        lo = float(stats.beta.ppf(0.025, flagged, records - flagged + 1)) if flagged else 0.0
+        hi = float(stats.beta.ppf(0.975, flagged + 1, records - flagged)) if flagged < records else 1.0
+        row = {"method": "direct", "simulator": kind, "noise": noise, "inputs": inputs, "records": records,
+               "first_seed": first, "level": float(analysis["level"]), "warned": flagged,
+               "rate": flagged / records, "rate_ci95": [lo, hi], "smallest_p": sorted(smallest)[:5],
+               "seconds": time.perf_counter() - t0, "cpu_seconds": time.process_time() - c0}
+        rows.append(row)
+        print(f"direct {kind:>5s} {100 * noise:3.0f} % F1{'+F2' if inputs == 2 else '   '} false alarms "
+              f"{flagged}/{records} ({100 * flagged / records:.1f} %, 95 % CI {100 * lo:.1f}-{100 * hi:.1f} %, level "
+              f"{100 * row['level']:.0f} %)  {row['seconds']:6.1f} s", flush=True)
+    total = sum(r["warned"] for r in rows)
+    print(f"all: {total}/{records * len(rows)} = {100 * total / (records * len(rows)):.2f} %", flush=True)
+    return rows
+
+
 def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, ...], excitations: tuple[int, ...],
         seeds: range, out: str | None = None, over: int = OVERSAMPLE) -> list[dict[str, Any]]:
     nm = NumericModel(load_model("builtin:two-mass-rig"))
@@ -232,6 +281,9 @@ def main() -> None:
     parser.add_argument("--inputs", help="comma-separated excitations: 1 (F1) and/or 2 (F1 + F2)")
     parser.add_argument("--seeds", type=int, help="number of seeds (0, 1, ...)")
     parser.add_argument("--out", default="coverage", help="result name in benchmarks/results (default coverage)")
+    parser.add_argument("--false-alarm", type=int, metavar="RECORDS",
+                        help="direct's force-independence test on RECORDS records per setting where force and noise "
+                             "are independent (writes coverage_direct_false_alarm.json)")
     parser.add_argument("--oversample", type=int, default=16,
                         help="oversampling of the DAQ simulators (default 16; 64 for claims at 1 %% noise)")
     args = parser.parse_args()
@@ -240,6 +292,9 @@ def main() -> None:
 
 
 def _main(args: argparse.Namespace) -> None:
+    if args.false_alarm:
+        write_results("coverage_direct_false_alarm", run_false_alarm(args.false_alarm))
+        return
     two_step = os.environ.get("CAPPE_BENCH_TWO_STEP")
     if two_step:  # CAPPE_BENCH_TWO_STEP_CASES=3,4,5: a part of the cases (indices), to run in parallel processes
         inputs, cases, name = ((2, TWO_STEP_BOTH_INPUTS, "coverage_two_step_f1f2") if two_step == "f1f2" else
