@@ -117,6 +117,7 @@ def derivatives(
     *,
     track: ModeReference | bool = False,
     parameters: Sequence[str] | None = None,
+    modes: Sequence[int] | NDArray[np.intp] | None = None,
 ) -> ModalDerivatives:
     """Modal derivatives at one parameter vector (see :meth:`ModalEngine.derivatives`)."""
     model = engine.model
@@ -143,6 +144,12 @@ def derivatives(
         index = _track(reference, phi[None, :, :])[0][0]
     else:
         index = np.arange(engine.n_modes)
+    if modes is not None:
+        chosen = np.asarray(modes, dtype=np.intp).reshape(-1)
+        if chosen.size and (chosen.min() < -index.size or chosen.max() >= index.size):
+            msg = f"modes must index the engine's {index.size} modes; got {chosen.tolist()}"
+            raise ModelError(msg)
+        index = index[chosen]
     scale = max(float(np.abs(lam).max()), 1e-300)
     lam_r = lam[index]
     cols = np.arange(index.size)

@@ -333,11 +333,13 @@ class ModalEngine:
         *,
         track: ModeReference | bool = False,
         parameters: Sequence[str] | None = None,
+        modes: Sequence[int] | NDArray[np.intp] | None = None,
     ) -> ModalDerivatives:
         """Analytic derivatives of frequencies, damping ratios and sensor shapes at one parameter vector.
 
         Returns a :class:`cappe.modal.ModalDerivatives`, with respect to ``parameters`` (default all; naming
-        only the ones needed saves most of the work on models with many parameters).
+        only the ones needed saves most of the work on models with many parameters), of the ``modes`` asked for
+        (default all the engine reports; the derivatives stay exact: the expansion runs over every mode).
 
         Parameters
         ----------
@@ -349,6 +351,9 @@ class ModalEngine:
             Order the modes like a reference (``True``: the nominal modes at this position).
         parameters : sequence of str, optional
             Parameters to differentiate by (default all).
+        modes : sequence of int, optional
+            The modes returned, in this order: indices (0-based) into the modes the engine reports (after
+            ``track``); default all of them.
 
         Returns
         -------
@@ -356,7 +361,7 @@ class ModalEngine:
         """
         from cappe.modal._derivatives import derivatives
 
-        return derivatives(self, params, position, track=track, parameters=parameters)
+        return derivatives(self, params, position, track=track, parameters=parameters, modes=modes)
 
     def evaluate(
         self,
