@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import scipy.sparse as sps
 from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import IllConditionedWarning, ModelError
@@ -209,11 +210,12 @@ def derivatives(
 
 
 def _stack_times(stack: Array, columns: NDArray[Any]) -> CArray:
-    """``stack[i] @ columns`` for every i of a real (n_p, n, n) stack and complex (n, m) columns: one real product
-    of the stacked rows with the real and imaginary parts side by side, (n_p, n, m)."""
+    """``stack[i] @ columns`` for every i of a real (n_p, n, n) stack and complex (n, m) columns: one sparse product
+    of the stacked rows with the real and imaginary parts side by side, (n_p, n, m) (a parameter's derivative
+    matrix touches the few DOFs of its element: the dense product was 5 % of the three-axis refinement)."""
     n_p, n, _ = stack.shape
     m = columns.shape[1]
-    out = stack.reshape(n_p * n, n) @ np.concatenate([columns.real, columns.imag], axis=1)
+    out = np.asarray(sps.csr_array(stack.reshape(n_p * n, n)) @ np.concatenate([columns.real, columns.imag], axis=1))
     return np.asarray((out[:, :m] + 1j * out[:, m:]).reshape(n_p, n, m), dtype=complex)
 
 
