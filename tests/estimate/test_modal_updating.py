@@ -357,3 +357,42 @@ def test_first_order_modes_warn_with_their_bias_against_exact_ones(machine_tool_
     np.testing.assert_allclose([bias[n] for n in names], est.values / truth - 1, rtol=0, atol=1e-8)
     assert np.max(np.abs(est.values - truth) / est.std) > 3
     assert any("first-order" in w for w in est.diagnostics["warnings"])
+
+
+def test_first_order_refinement_differentiates_only_the_paired_modes(slide, monkeypatch):
+    # issue 24: the refinement differentiated every model mode (162 on the three-axis machine) and used the 25 it
+    # paired; it now pairs on the modes, then differentiates those only, with the same residuals and Jacobian
+    nm = NumericModel(slide)
+    reference = ModalEngine(slide).modal_data(SLIDE_POSITIONS, params=SLIDE_TRUTH)
+    reference = ModalData(reference.sensors, tuple(
+        ModalDataSet(s.position, s.frequency[:3], s.damping[:3], s.shapes[:, :3]) for s in reference.sets))
+    names = ["km", "kmr", "kg0", "cm", "eta"]
+    space = ParameterSpace.from_model(nm, names, bounds={n: (1e-3, 1e9) for n in names}, values=SLIDE_TRUTH)
+    problem = ModalUpdatingEstimator(slide, names)._problem(nm, space, reference)
+    p = space.start * np.array([1.2, 0.8, 1.1, 1.3, 0.7])
+    asked = []
+    original = ModalEngine.derivatives
+
+    def spy(self, *args, **kwargs):
+        d = original(self, *args, **kwargs)
+        if kwargs.get("parameters"):
+            asked.append(d.frequency.size)
+        return d
+
+    monkeypatch.setattr(ModalEngine, "derivatives", spy)
+    jac, res = problem.jacobian(p), problem.residuals(p)
+    assert asked == [3] * len(SLIDE_POSITIONS)
+    # against the derivatives of every mode, paired afterwards (the former path)
+    monkeypatch.setattr(ModalEngine, "derivatives", original)
+    engine = ModalEngine(nm, sensors=list(reference.sensors))
+    for k, data_set in enumerate(reference.sets):
+        d = engine.derivatives(space.full(p), data_set.position, parameters=space.names)
+        sub = engine.derivatives(space.full(p), data_set.position, parameters=space.names, modes=[2, 0])
+        np.testing.assert_allclose(sub.d_frequency, d.d_frequency[[2, 0]], rtol=1e-12, atol=0)
+        np.testing.assert_allclose(sub.d_shapes, d.d_shapes[:, [2, 0]], rtol=0, atol=1e-12 * np.abs(d.d_shapes).max())
+        np.testing.assert_allclose(sub.d_damping, d.d_damping[[2, 0]], rtol=1e-10, atol=0)
+        idx = problem.pairings(p)[k].model
+        f_rows = slice(3 * k * (2 + 2 * len(reference.sensors)), None)
+        np.testing.assert_allclose(res[f_rows][:3], (d.frequency[idx] - data_set.frequency) / data_set.frequency,
+                                   rtol=1e-12, atol=1e-15)
+        np.testing.assert_allclose(jac[f_rows][:3], d.d_frequency[idx] / data_set.frequency[:, None], rtol=1e-12)

@@ -168,3 +168,92 @@ def test_exact_mode_derivatives_match_finite_differences(slide):
         analytic = (da - unit * da[row, cols]) / d.shapes[row, cols]
         fd_shapes = (normalized(bu) - normalized(bd)) / (2 * h)
         np.testing.assert_allclose(analytic, fd_shapes, atol=1e-5 * np.abs(fd_shapes).max() + 1e-12)
+
+
+def _reference_exact_derivatives(model, p, position, poles, names, sensors):
+    """The exact-mode derivatives as written before issue 24's speed work, kept here as the reference: numpy's eig of
+    the complex state matrix built with ``inv(M)``, every parameter's modal expansion over all 2 n eigenvectors in
+    a loop."""
+    mats = model.matrices(p, position)
+    dmats = model.matrix_derivatives(p, position, parameters=names)
+    n = model.n_dof
+    minv = np.linalg.inv(mats["M"])
+    stiff, visc = mats["K"] + 1j * mats["H"], mats["C"] + mats["G"]
+    state = np.zeros((2 * n, 2 * n), dtype=complex)
+    state[:n, n:] = np.eye(n)
+    state[n:, :n] = -(minv @ stiff)
+    state[n:, n:] = -(minv @ visc)
+    lam, vec = np.linalg.eig(state)
+    inv = np.linalg.inv(vec)
+    idx = np.array([int(np.argmin(np.abs(lam - pole))) for pole in poles])
+    gap = lam[idx][None, :] - lam[:, None]
+    near = np.zeros(gap.shape, dtype=bool)
+    near[idx, np.arange(idx.size)] = True
+    safe = np.where(near, 1.0, gap)
+    w_low = inv[:, n:] @ minv
+    v_q, v_v = vec[:n, idx], vec[n:, idx]
+    d_poles, d_shapes = [], []
+    for i in range(len(names)):
+        d_low = (dmats["K"][i] + 1j * dmats["H"][i]) @ v_q + (dmats["C"][i] + dmats["G"][i]) @ v_v
+        d_low -= dmats["M"][i] @ (minv @ (stiff @ v_q) + minv @ (visc @ v_v))
+        g = -(w_low @ d_low)
+        d_poles.append(g[idx, np.arange(idx.size)])
+        d_shapes.append(sensors @ (vec[:n] @ np.where(near, 0.0, g / safe)))
+    return lam[idx], sensors @ v_q, np.array(d_poles), np.array(d_shapes)
+
+
+def _gauge_free(shapes, d_shapes):
+    """Shapes scaled to 1 at their largest component and the derivatives of those (free of the complex scale)."""
+    row = np.argmax(np.abs(shapes), axis=0)
+    cols = np.arange(shapes.shape[1])
+    pivot = shapes[row, cols]
+    d_pivot = d_shapes[:, row, cols]  # (n_p, m)
+    return shapes / pivot, (d_shapes - shapes[None] * (d_pivot / pivot)[:, None, :]) / pivot
+
+
+@pytest.mark.parametrize("reuse", [True, False])
+def test_exact_mode_derivatives_equal_the_full_expansion_to_round_off(slide, reuse):
+    # issue 24: the derivatives reuse the engine's eigen-decomposition of the residuals' exact solve and take all
+    # parameters in one product; against the former path (own eig, one parameter at a time) to round-off
+    model = NumericModel(slide)
+    engine = ModalEngine(model, n_workers=1)
+    position = {"z": 0.25}
+    p = model.nominal * np.random.default_rng(5).uniform(0.8, 1.2, model.nominal.size)
+    names = ["km", "cm", "eta", "ms", "kg0"]
+    poles = engine.evaluate(p if reuse else p * (1 + 1e-3), position, exact=True).poles[0]
+    if not reuse:  # a decomposition kept for another vector is not used
+        poles = engine.evaluate(p[None, :].repeat(2, axis=0), position, exact=True).poles[0]
+    assert (engine._state_eigensystem(p, position) is not None) == reuse
+    d = exact_mode_derivatives(engine, p, position, poles=poles, parameters=names)
+    sensors = engine.sensor_rows(position)[1]
+    lam, shapes, d_poles, d_shapes = _reference_exact_derivatives(model, p, position, poles, names, sensors)
+    np.testing.assert_allclose(d.poles, lam, rtol=1e-12)
+    np.testing.assert_allclose(d.d_poles, d_poles, rtol=1e-9, atol=1e-11 * np.abs(d_poles).max())
+    unit, d_unit = _gauge_free(d.shapes, d.d_shapes)
+    unit_ref, d_unit_ref = _gauge_free(shapes, d_shapes)
+    np.testing.assert_allclose(unit, unit_ref, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(d_unit, d_unit_ref, rtol=0, atol=1e-9 * np.abs(d_unit_ref).max())
+
+
+def test_the_exact_jacobian_reuses_the_residuals_eigen_decomposition(slide, monkeypatch):
+    # issue 24: residuals and Jacobian at one vector take one eig of the state matrix per position, not two
+    from cappe.estimate import ParameterSpace
+    from cappe.estimate._exact_modal import ExactModalProblem
+
+    model = NumericModel(slide)
+    positions = [{"z": 0.0}, {"z": 0.25}]
+    reference = ModalEngine(model).modal_data(positions)
+    space = ParameterSpace.from_model(model, ["km", "cm", "eta", "kg0"])
+    problem = ExactModalProblem(model, space, reference, (1.0, 0.01, 1.0))
+    calls = []
+    original = np.linalg.eig
+
+    def counted(a, *args, **kwargs):
+        calls.append(np.shape(a))
+        return original(a, *args, **kwargs)
+
+    monkeypatch.setattr(np.linalg, "eig", counted)
+    p = space.start * 1.05
+    problem.residuals(p)
+    problem.jacobian(p)
+    assert len(calls) == len(positions)

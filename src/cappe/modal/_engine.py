@@ -137,6 +137,9 @@ class ModalEngine:
         self._nominal_cache: dict[tuple[float, ...], _NominalReduction] = {}
         self._stacked_cache: dict[tuple[float, ...], _Projection] = {}
         self._fused_cache: dict[tuple[float, ...], tuple[Array, Array] | None] = {}
+        # the state matrix's eigen-decomposition of the last single-sample exact solve at each position, for
+        # exact_mode_derivatives at the same vector (a second eig of the 2 n_dof state matrix otherwise)
+        self._state_cache: dict[tuple[float, ...], tuple[bytes, StateEigensystem]] = {}
         self._dof_channels = sensors == "dofs" or (sensors is None and not self.model.structure.sensors)
         self.sensors = self._sensor_rows(self.model.structure.default_position())[0]
 
@@ -246,6 +249,14 @@ class ModalEngine:
         chunk = self._solve(p[None, :], position, track=previous, exact=False, contributions=False, full=True)
         return ModeReference(np.asarray(chunk.full_shapes)[0], mats["M"], chunk.frequency[0])
 
+    def _state_eigensystem(self, params: Array, position: Mapping[str, float] | None) -> StateEigensystem | None:
+        """The state eigen-decomposition kept from the last single-vector exact solve of ``params`` (bit for bit) at
+        ``position``, else None."""
+        kept = self._state_cache.get(self.model.position_vector(position))
+        if kept is None or kept[0] != np.asarray(params, dtype=float).tobytes():
+            return None
+        return kept[1]
+
     def _reference_for(self, track: ModeReference | bool, position: Mapping[str, float] | None) -> ModeReference | None:
         """The reference a ``track`` argument stands for: True means the nominal modes at ``position``."""
         if track is True:
@@ -323,11 +334,13 @@ class ModalEngine:
         *,
         track: ModeReference | bool = False,
         parameters: Sequence[str] | None = None,
+        modes: Sequence[int] | NDArray[np.intp] | None = None,
     ) -> ModalDerivatives:
         """Analytic derivatives of frequencies, damping ratios and sensor shapes at one parameter vector.
 
         Returns a :class:`cappe.modal.ModalDerivatives`, with respect to ``parameters`` (default all; naming
-        only the ones needed saves most of the work on models with many parameters).
+        only the ones needed saves most of the work on models with many parameters), of the ``modes`` asked for
+        (default all the engine reports; the derivatives stay exact: the expansion runs over every mode).
 
         Parameters
         ----------
@@ -339,6 +352,9 @@ class ModalEngine:
             Order the modes like a reference (``True``: the nominal modes at this position).
         parameters : sequence of str, optional
             Parameters to differentiate by (default all).
+        modes : sequence of int, optional
+            The modes returned, in this order: indices (0-based) into the modes the engine reports (after
+            ``track``); default all of them.
 
         Returns
         -------
@@ -346,7 +362,7 @@ class ModalEngine:
         """
         from cappe.modal._derivatives import derivatives
 
-        return derivatives(self, params, position, track=track, parameters=parameters)
+        return derivatives(self, params, position, track=track, parameters=parameters, modes=modes)
 
     def evaluate(
         self,
@@ -660,7 +676,11 @@ class ModalEngine:
         poles = cshapes = None
         if exact:
             assert phi is not None  # formed above for exact
-            poles, psi = _exact_modes(mats, reduction.inverse_mass(), phi, omega)
+            minv = reduction.inverse_mass()
+            system = StateEigensystem.of(mats, minv)
+            if pb.shape[0] == 1:  # one vector (the exact refinements): kept for its derivatives
+                self._state_cache[model.position_vector(position)] = (pb[0].tobytes(), system.first())
+            poles, psi = _exact_modes(mats, minv, phi, omega, system)
             cshapes = psi if self._dof_channels else sensor_rows @ psi
         return _Chunk(omega / (2 * np.pi), zeta, shapes, index, mac, contrib, gradient, poles, cshapes,
                       phi if full else None)
@@ -1029,22 +1049,59 @@ def _track(reference: ModeReference, phi: Array) -> tuple[NDArray[np.intp], Arra
     return index.astype(np.intp), chosen
 
 
+@dataclass(frozen=True)
+class StateEigensystem:
+    """The eigen-decomposition of the first-order state matrix ``A = [[0, I], [-M^-1 (K + iH), -M^-1 (C + G)]]``
+    of a batch (or of one vector: no batch axis), with the matrices it was made from.
+
+    Attributes
+    ----------
+    mats : dict
+        ``M, C, G, K, H`` (B, n, n) or (n, n).
+    minv : ndarray
+        ``M^-1``.
+    lam : ndarray of complex, shape (B, 2 n) or (2 n,)
+        Eigenvalues of ``A``.
+    vec : ndarray, shape (B, 2 n, 2 n) or (2 n, 2 n)
+        Right eigenvectors (columns), as LAPACK returns them.
+    """
+
+    mats: dict[str, Array]
+    minv: Array
+    lam: NDArray[Any]
+    vec: NDArray[Any]
+
+    @classmethod
+    def of(cls, mats: dict[str, Array], minv: Array) -> StateEigensystem:
+        """The decomposition of the batch's state matrices (one batched ``eig``)."""
+        b, n, _ = mats["M"].shape
+        stiff = mats["K"] + 1j * mats["H"] if np.any(mats["H"]) else mats["K"]
+        state = np.zeros((b, 2 * n, 2 * n), dtype=stiff.dtype)
+        state[:, :n, n:] = np.eye(n)
+        state[:, n:, :n] = -(minv @ stiff)
+        state[:, n:, n:] = -(minv @ (mats["C"] + mats["G"]))
+        lam, vec = np.linalg.eig(state)
+        return cls(mats, minv, lam, vec)
+
+    def first(self) -> StateEigensystem:
+        """The first vector's decomposition, without the batch axis (copies: the batch's arrays are released)."""
+        return StateEigensystem({k: v[0].copy() for k, v in self.mats.items()}, self.minv[0].copy(),
+                                self.lam[0].copy(), self.vec[0].copy())
+
+
 def _exact_modes(
-    mats: dict[str, Array], minv: Array, phi: Array, omega: Array
+    mats: dict[str, Array], minv: Array, phi: Array, omega: Array, system: StateEigensystem | None = None
 ) -> tuple[NDArray[np.complex128], NDArray[np.complex128]]:
     """Complex poles and displacement shapes of the full damped system, paired with the real modes.
 
     Pairing is by the mass-weighted similarity ``|phi^T M psi|^2 / psi^H M psi`` (optimal assignment);
     rigid-body modes keep pole 0 and their real shape; a real mode without an oscillatory partner (similarity
-    below 0.5: overdamped) gets NaN.
+    below 0.5: overdamped) gets NaN. ``system``: the state matrices' decomposition, if already made.
     """
     b, n, m = phi.shape
-    stiff = mats["K"] + 1j * mats["H"] if np.any(mats["H"]) else mats["K"]
-    state = np.zeros((b, 2 * n, 2 * n), dtype=stiff.dtype)
-    state[:, :n, n:] = np.eye(n)
-    state[:, n:, :n] = -(minv @ stiff)
-    state[:, n:, n:] = -(minv @ (mats["C"] + mats["G"]))
-    lam, vec = np.linalg.eig(state)
+    if system is None:
+        system = StateEigensystem.of(mats, minv)
+    lam, vec = system.lam, system.vec
     poles = np.full((b, m), np.nan + 1j * np.nan)
     shapes = np.full((b, n, m), np.nan + 1j * np.nan)
     mphi = mats["M"] @ phi  # (B, n, m)
