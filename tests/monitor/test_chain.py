@@ -116,21 +116,10 @@ def _false_alarms(monitor: Monitor, baseline, data: list) -> int:
 
 
 @pytest.mark.slow
-@pytest.mark.extended(reason="the done-means' 1000 measurements (75 s); test_false_alarms_over_ten_healthy_days "
-                             "runs the same ten days of temperature cycles and wandering temperature with one "
-                             "measurement every 75 min (200) against the same 1 % mark")
-def test_false_alarms_over_1000_healthy_measurements(monitor: Monitor, baseline, healthy: list) -> None:
-    # done-means: at most 1 % false alarms over 1000 healthy measurements (ten days of temperature cycles and
-    # a wandering temperature, new noise)
-    data = simulate_scenario(monitor.config, "healthy", n=1000, model=monitor.model, rng=400,
-                             start=_after(healthy))
-    assert _false_alarms(monitor, baseline, data) <= 10
-
-
-@pytest.mark.slow
 def test_false_alarms_over_ten_healthy_days(monitor: Monitor, baseline, healthy: list) -> None:
     # the done-means' ten days of daily temperature cycles (+-4 K) and wandering temperature, new noise, sampled
-    # every 75 min instead of 15: the same span of conditions the baseline must compensate, in 200 chart steps.
+    # every 75 min instead of 15 (1000 healthy measurements at <= 0.1 % false alarms, against an independent
+    # generator with cold starts and a lagging sensor: tests/monitor/test_calibration.py, extended): the same span of conditions the baseline must compensate, in 200 chart steps.
     # The mark is the done-means' 1 %: at most 2 of 200 (the charts are designed for 0.1 %: 0.2 expected)
     data = simulate_scenario(monitor.config, "healthy", n=200, model=monitor.model, rng=401,
                              interval=timedelta(minutes=75), start=_after(healthy))
