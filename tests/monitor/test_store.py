@@ -389,7 +389,11 @@ def _assert_complete(store: HistoryStore) -> list[MeasurementRecord]:
 def test_concurrent_ingests_into_one_machine_are_serialized(store, url):
     # this process and a writer process, 40 ingests each into the same machine at the same time
     n = 40
-    child = _writer(url, "child", n, 0.002, 0.005)
+    # gaps of 30 ms, longer than most of SQLite's busy-handler sleeps (1 to 100 ms): a blocked writer then finds
+    # the lock free when it wakes, and neither writer starves the other (with 5 ms gaps the child once made all
+    # its 40 ingests while this process slept in the busy handler, on a loaded CI machine)
+    gap = 0.03
+    child = _writer(url, "child", n, 0.002, gap)
     try:
         assert child.stdout.readline() == "ready\n", child.stderr.read()
         child.stdin.write("go\n")
@@ -403,7 +407,7 @@ def test_concurrent_ingests_into_one_machine_are_serialized(store, url):
                 tx.add_features(mid, {"count": (float(count), None), "rms": (0.1, 0.01)})
                 tx.add_estimates(mid, path="factors", values={"k11": 1.0 + count, "k12": 0.9})
                 tx.set_state({"count": count + 1})
-            time.sleep(0.005)
+            time.sleep(gap)
         out, err = child.communicate(timeout=120)
     finally:
         with contextlib.suppress(ProcessLookupError):
