@@ -6,6 +6,9 @@ reduction kept (the fixed-interface modal coordinates of a Craig-Bampton model),
 Elements, inputs, outputs and sensors attach to an interface node as to a point of a rigid body: the point is the
 node's coordinates (body frame, relative to the body's ``position``) and the motion there is the node's DOFs.
 Sensors and outputs may also sit on *interior* nodes that a recovery matrix maps from the body's coordinates.
+A point *offset* from a node (``{node: NAME, offset: [dx, dy, dz]}`` in a model file) hangs on it by a massless
+rigid link: its displacement is ``u + theta x d`` from the node's translations ``u`` and rotations ``theta``, its
+rotation the node's (the node needs the rotational DOFs the cross product takes).
 
 Matrices stay numbers: a flexible body adds ``s_m * M_fe`` to M and ``s_k * K_fe`` to K with scale factors
 ``s_m``, ``s_k`` that may be parameters (exact derivatives: the matrices themselves). Damping is one of
@@ -36,7 +39,7 @@ from numpy.typing import NDArray
 from cappe.exceptions import ModelError
 
 __all__ = ["DAMPING_KINDS", "MAX_FLEXIBLE_DOF", "FlexibleBody", "FlexibleDamping", "InterfaceNode", "NodeLine",
-           "frame_node_entries"]
+           "OffsetPoint", "frame_node_entries"]
 
 Array = NDArray[np.float64]
 _DIRECTIONS = ("x", "y", "z", "rx", "ry", "rz")
@@ -81,6 +84,42 @@ class InterfaceNode:
         int or None
         """
         return self.rows[self.dofs.index(direction)] if direction in self.dofs else None
+
+
+@dataclass(frozen=True)
+class OffsetPoint:
+    """A point rigidly linked to a node of a flexible body (a massless rigid link).
+
+    Attributes
+    ----------
+    node : str
+        The node it hangs on.
+    offset : tuple of 3 float
+        From the node to the point, body frame (m).
+    point : tuple of 3 float
+        Its coordinates, body frame, relative to the body's position (m): the node's plus the offset.
+    """
+
+    node: str
+    offset: tuple[float, float, float]
+    point: tuple[float, float, float]
+
+
+def needed_rotations(offset: Sequence[float]) -> tuple[str, ...]:
+    """The rotations of a node that ``theta x d`` takes for the offset ``d``: ``rx`` where ``d`` has a y or z
+    component, and so on.
+
+    Parameters
+    ----------
+    offset : sequence of 3 float
+        The offset ``d`` (m).
+
+    Returns
+    -------
+    tuple of str
+        Among ``rx ry rz``.
+    """
+    return tuple(f"r{axis}" for a, axis in enumerate("xyz") if any(offset[b] != 0 for b in range(3) if b != a))
 
 
 @dataclass(frozen=True)
@@ -134,6 +173,8 @@ class FlexibleBody:
         Free text.
     lines : tuple of NodeLine
         Lines of interface nodes that attachment points may travel along (their coordinates depend on an axis).
+    offsets : tuple of OffsetPoint
+        Points rigidly linked to nodes (the model's ``{node, offset}`` points).
     """
 
     name: str
@@ -149,6 +190,7 @@ class FlexibleBody:
     modal_damping: Array | None = None
     description: str = ""
     lines: tuple[NodeLine, ...] = ()
+    offsets: tuple[OffsetPoint, ...] = ()
 
     @property
     def n_dof(self) -> int:
@@ -204,6 +246,26 @@ class FlexibleBody:
         dist = np.linalg.norm(coords - np.asarray(point, dtype=float), axis=1)
         k = int(np.argmin(dist))
         return candidates[k] if dist[k] <= 1e-9 * size else None
+
+    def offset_at(self, point: Sequence[float]) -> OffsetPoint | None:
+        """The offset point at ``point`` (body frame, m; within 1e-9 of the body's size), or None.
+
+        Parameters
+        ----------
+        point : sequence of 3 float
+            Body-frame coordinates (m).
+
+        Returns
+        -------
+        OffsetPoint or None
+        """
+        if not self.offsets:
+            return None
+        coords = np.array([n.point for n in (*self.nodes, *self.interior)]).reshape(-1, 3)
+        size = max(float(np.ptp(coords, axis=0).max()), 1.0) if coords.size else 1.0
+        dist = np.linalg.norm(np.array([o.point for o in self.offsets]) - np.asarray(point, dtype=float), axis=1)
+        k = int(np.argmin(dist))
+        return self.offsets[k] if dist[k] <= 1e-9 * size else None
 
     def line_through(self, point: Sequence[sp.Expr], samples: Sequence[Mapping[sp.Symbol, sp.Expr]],
                      ) -> tuple[NodeLine, sp.Expr] | None:

@@ -28,7 +28,7 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from types import MappingProxyType
 from typing import Any
@@ -41,10 +41,12 @@ from cappe.model._expressions import NAME_PATTERN, as_expression, shown, symbol
 from cappe.model.flexible import (
     FlexibleBody,
     InterfaceNode,
+    OffsetPoint,
     checked_matrices,
     frame_node_entries,
     matrix_source,
     modal_damping_matrix,
+    needed_rotations,
     parse_damping,
     parse_lines,
     parse_nodes,
@@ -1249,16 +1251,65 @@ class StructureBuilder:
         return next((f for f in self._flexible if f.name == body), None)
 
     def _point(self, body: str, value: object, where: str) -> Vector3:
-        """A point in ``body``'s frame: a 3-vector, or on a flexible body the name of one of its nodes."""
+        """A point in ``body``'s frame: a 3-vector, or on a flexible body the name of one of its nodes or a point
+        offset from one (``{node: NAME, offset: [dx, dy, dz]}``)."""
         flex = self._flexible_named(body)
-        if flex is not None and isinstance(value, str):
-            node = flex.node(value)
-            if node is None:
-                known = ", ".join(n.name for n in (*flex.nodes, *flex.interior))
-                msg = f"flexible body {body!r} has no node {value!r}; its nodes: {known} ({where})"
+        if isinstance(value, Mapping):
+            if flex is None:
+                msg = (f"a point {{node, offset}} sits on a flexible body; {body!r} is not one: give a 3-vector "
+                       f"({where})")
                 raise ModelError(msg)
-            return tuple(sp.Float(v) for v in node.point)  # type: ignore[return-value]
+            return self._offset_point(flex, value, where)
+        if flex is not None and isinstance(value, str):
+            return tuple(sp.Float(v) for v in self._node(flex, value, where).point)  # type: ignore[return-value]
         return self._vector(value, where)
+
+    def _node(self, flex: FlexibleBody, name: object, where: str) -> InterfaceNode:
+        node = flex.node(name) if isinstance(name, str) else None
+        if node is None:
+            known = ", ".join(n.name for n in (*flex.nodes, *flex.interior))
+            msg = f"flexible body {flex.name!r} has no node {name!r}; its nodes: {known} ({where})"
+            raise ModelError(msg)
+        return node
+
+    def _offset_point(self, flex: FlexibleBody, value: Mapping[Any, Any], where: str) -> Vector3:
+        """A point rigidly linked to a node of ``flex`` (:class:`OffsetPoint`), recorded on the body; its
+        coordinates are the node's plus the offset."""
+        if set(value) != {"node", "offset"}:
+            msg = (f"a point offset from a node of flexible body {flex.name!r} is {{node: NAME, offset: [dx, dy, dz]}}"
+                   f"; got keys {sorted(map(str, value))} ({where})")
+            raise ModelError(msg)
+        node = self._node(flex, value["node"], f"{where}.node")
+        vec = self._vector(value["offset"], f"{where}.offset")
+        if any(v.free_symbols for v in vec):
+            msg = (f"the offset of a point on flexible body {flex.name!r} must be numbers (m); got "
+                   f"{[str(v) for v in vec]} ({where}.offset)")
+            raise ModelError(msg)
+        offset = tuple(float(v) for v in vec)
+        point = tuple(p + d for p, d in zip(node.point, offset, strict=True))
+        if not any(offset):
+            return tuple(sp.Float(v) for v in node.point)  # type: ignore[return-value]
+        missing = [d for d in needed_rotations(offset) if d not in node.dofs]
+        if missing:
+            msg = (f"node {node.name!r} of flexible body {flex.name!r} has no rotational DOF "
+                   f"{', '.join(missing)}: a point offset by {list(offset)} from it moves with its rotation "
+                   f"({where})")
+            raise ModelError(msg)
+        other = flex.node_at(point)
+        if other is not None:
+            msg = (f"the point offset by {list(offset)} from node {node.name!r} of flexible body {flex.name!r} is "
+                   f"node {other.name!r}: name that node, or link the two nodes by an element ({where})")
+            raise ModelError(msg)
+        found = flex.offset_at(point)
+        if found is None:
+            entry = OffsetPoint(node.name, offset, point)  # type: ignore[arg-type]
+            updated = replace(flex, offsets=(*flex.offsets, entry))
+            self._flexible[self._flexible.index(flex)] = updated
+        elif found.node != node.name:
+            msg = (f"the point offset by {list(offset)} from node {node.name!r} of flexible body {flex.name!r} "
+                   f"coincides with the point offset by {list(found.offset)} from node {found.node!r} ({where})")
+            raise ModelError(msg)
+        return tuple(sp.Float(v) for v in point)  # type: ignore[return-value]
 
     def _on_node(self, body: str, value: object, where: str, *, interior: bool) -> Vector3:
         point = self._point(body, value, where)
@@ -1301,6 +1352,14 @@ class StructureBuilder:
             coords = None
         if coords is None:
             self._check_on_line(flex, point, where, interior=interior)
+            return
+        linked = flex.offset_at(coords)
+        if linked is not None:
+            base = flex.node(linked.node)
+            if not interior and base not in flex.nodes:
+                msg = (f"point {coords} hangs on interior node {linked.node!r} of flexible body {body!r}: elements "
+                       f"and inputs attach to interface nodes ({where})")
+                raise ModelError(msg)
             return
         if flex.node_at(coords, interior=interior) is None:
             kinds = "nodes" if interior else "interface nodes"

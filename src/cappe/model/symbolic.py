@@ -19,7 +19,7 @@ from numpy.typing import NDArray
 
 from cappe.exceptions import ModelError
 from cappe.model._expressions import symbol
-from cappe.model.flexible import FlexibleBody
+from cappe.model.flexible import FlexibleBody, OffsetPoint
 from cappe.model.geometry import point_jacobian, skew
 from cappe.model.structure import DIRECTIONS, GROUND, Output, Structure
 
@@ -223,8 +223,11 @@ class SymbolicModel:
             return self._line_rows(body, point, rotation=rotation)
         node = flex.node_at(coords)
         if node is None:
-            msg = f"point {coords} is not at a node of flexible body {body!r}"
-            raise ModelError(msg)
+            linked = flex.offset_at(coords)
+            if linked is None:
+                msg = f"point {coords} is not at a node of flexible body {body!r}"
+                raise ModelError(msg)
+            return self._offset_rows(body, linked, rotation=rotation)
         start = self._offset[body]
         names = DIRECTIONS[3:] if rotation else DIRECTIONS[:3]
         interface = node in flex.nodes
@@ -239,6 +242,22 @@ class SymbolicModel:
                 assert flex.recovery is not None  # interior nodes come with their recovery matrix
                 rows.append({start + j: sp.Float(float(v)) for j, v in enumerate(flex.recovery[r]) if v != 0})
         return rows
+
+    def _offset_rows(self, body: str, linked: OffsetPoint, *, rotation: bool) -> list[SparseRow]:
+        """Rows of a point rigidly linked to a node: ``u + theta x d`` (translations), the node's ``theta``
+        (rotations)."""
+        node_point = self.structure.flexible_body(body).node(linked.node)
+        assert node_point is not None  # the builder checked the node
+        point = [sp.Float(v) for v in node_point.point]
+        theta = self._flexible_rows(body, point, rotation=True)
+        if rotation:
+            return theta
+        u = self._flexible_rows(body, point, rotation=False)
+        d = [sp.Float(v) for v in linked.offset]
+        # (theta x d)_a = theta_b d_c - theta_c d_b for (a, b, c) cyclic; a component the node does not carry
+        # stays unknown (empty), as at the node itself
+        return [_combine([(sp.Integer(1), u[a]), (d[(a + 2) % 3], theta[(a + 1) % 3]),
+                          (-d[(a + 1) % 3], theta[(a + 2) % 3])]) if u[a] else {} for a in range(3)]
 
     def _line_rows(self, body: str, point: Sequence[sp.Expr], *, rotation: bool) -> list[SparseRow]:
         """Rows of a point travelling along a line of a flexible body's nodes: the nodes' DOFs weighted by the
