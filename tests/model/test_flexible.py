@@ -634,3 +634,94 @@ def test_offset_points_in_a_model_file_and_their_errors(tmp_path: Path) -> None:
         b.sensor("t", body="beam", point={"node": "n4", "offset": [-0.15, -0.08, 0.15]})
     b.sensor("u", body="beam", point={"node": "n3", "offset": [0.0, 0.0, 0.0]})  # the node itself
     assert NumericModel(b.build()).sensor_matrix()[0][-3:] == ["u:x", "u:y", "u:z"]
+
+
+# -- sensors and outputs moving along a line of nodes -----------------------------------------------------------------
+def _rail_with_moving_sensor(interpolation: str, fixed_node: int | None = None) -> NumericModel:
+    """The beam on its supports (nothing on it moves with p), a sensor and an output riding the rail at x = p, or
+    fixed on node ``fixed_node``."""
+    nodes, k, m = _beam()
+    b = StructureBuilder("scan")
+    b.axis("p", [0.0, 0.3, 0.6, 1.2])
+    b.flexible_body("beam", mass=m, stiffness=k, nodes=_node_entries(nodes),
+                    lines=[{"name": "rail", "nodes": [f"n{i}" for i in range(N_NODES)],
+                            "interpolation": interpolation}])
+    _supported(b, "beam", "n0", f"n{N_NODES - 1}")
+    b.input("F", body="beam", point="n1", direction="z")
+    point: object = ["p", 0, 0] if fixed_node is None else f"n{fixed_node}"
+    b.sensor("m", body="beam", point=point)
+    b.output("mz", body="beam", point=point, direction="z")
+    return NumericModel(b.build())
+
+
+def _interpolation_rows(p: float, interpolation: str) -> np.ndarray:
+    """(3, 6 N) rows of the point x = p on the beam along x, written out here: hat functions of the translations, or
+    the beam element's cubics (w = H1 w_i + L H2 w'_i + H3 w_j + L H4 w'_j, slopes y' = rz, z' = -ry)."""
+    step = L_BEAM / (N_NODES - 1)
+    i = min(int(p // step), N_NODES - 2)
+    xi = (p - i * step) / step
+    rows = np.zeros((3, 6 * N_NODES))
+    linear = ((i, 1 - xi), (i + 1, xi))
+    if interpolation == "linear":
+        for node, weight in linear:
+            rows[:, 6 * node:6 * node + 3] += weight * np.eye(3)
+        return rows
+    h1, h2, h3, h4 = 1 - 3 * xi**2 + 2 * xi**3, xi - 2 * xi**2 + xi**3, 3 * xi**2 - 2 * xi**3, -(xi**2) + xi**3
+    for node, weight in linear:
+        rows[0, 6 * node] += weight  # axial: linear
+    for node, hw, hs in ((i, h1, h2), (i + 1, h3, h4)):
+        rows[1, 6 * node + 1] += hw
+        rows[1, 6 * node + 5] += step * hs  # y' = rz
+        rows[2, 6 * node + 2] += hw
+        rows[2, 6 * node + 4] -= step * hs  # z' = -ry
+    return rows
+
+
+@pytest.mark.parametrize("interpolation", ["linear", "hermite"])
+def test_sensor_and_output_moving_along_a_line_interpolate_the_nodes(interpolation: str) -> None:
+    moving = _rail_with_moving_sensor(interpolation)
+    mats = moving.matrices()
+    lam, phi = scipy.linalg.eigh(mats["K"], mats["M"])
+    step = L_BEAM / (N_NODES - 1)
+    # at a node: the sensor fixed on that node (rows, shapes and FRF)
+    for node in (0, 2, 5):
+        fixed = _rail_with_moving_sensor(interpolation, node)
+        at = {"p": node * step}
+        np.testing.assert_allclose(moving.sensor_matrix(position=at)[1][-3:], fixed.sensor_matrix()[1][-3:],
+                                   rtol=0, atol=1e-12)  # the cubics at a knot: 1 and 0 up to rounding
+        np.testing.assert_allclose(modal_batch(moving, position=at, n_modes=10).shapes[0][-3:],
+                                   modal_batch(fixed, n_modes=10).shapes[0][-3:], rtol=0, atol=1e-9)
+        np.testing.assert_allclose(moving.system(position=at).frf([40.0, 400.0]).H,
+                                   fixed.system().frf([40.0, 400.0]).H, rtol=1e-10)
+    # in between: the rows are the shape functions written out with numpy, and so are the mode shapes there
+    sweep = np.linspace(0.0, L_BEAM, 25)
+    for p in sweep:
+        ref_rows = _interpolation_rows(p, interpolation)
+        got_rows = moving.sensor_matrix(position={"p": p})[1][-3:]
+        np.testing.assert_allclose(got_rows, ref_rows, rtol=0, atol=1e-12)
+        shapes = modal_batch(moving, position={"p": p}, n_modes=10).shapes[0][-3:]
+        ref = ref_rows @ phi[:, :10]
+        sign = np.sign(np.sum(shapes * ref, axis=0))
+        np.testing.assert_allclose(shapes * sign, ref, rtol=0, atol=1e-8 * abs(ref).max())
+        w = 2 * np.pi * 40.0
+        x = np.linalg.solve(mats["K"] - w**2 * mats["M"], _input_column(moving))
+        np.testing.assert_allclose(moving.system(position={"p": p}).frf([40.0]).H[0, 0, 0], ref_rows[2] @ x,
+                                   rtol=1e-9, atol=1e-15)
+    from cappe.modal import sensor_coordinates
+
+    np.testing.assert_allclose(sensor_coordinates(moving, position={"p": 0.45})["m"], [0.45, 0.0, 0.0], atol=1e-15)
+    # continuous: the change of the shapes at the sensor over a position step shrinks with the step (at a node and
+    # mid-element; Lipschitz: 100 times smaller step, about 100 times smaller change)
+    def shape_at(p: float) -> np.ndarray:
+        return np.abs(modal_batch(moving, position={"p": p}, n_modes=10).shapes[0][-3:])
+
+    for centre in (2 * step, 2.5 * step):
+        jumps = [np.abs(shape_at(centre + eps) - shape_at(centre - eps)).max() for eps in (1e-3, 1e-5)]
+        assert 0 < jumps[1] < 2e-2 * jumps[0], jumps
+
+
+def _input_column(model: NumericModel) -> np.ndarray:
+    """The force F (z at node n1) as a column of generalized forces, written out here."""
+    column = np.zeros(model.n_dof)
+    column[6 * 1 + 2] = 1.0
+    return column

@@ -6,6 +6,8 @@ reduction kept (the fixed-interface modal coordinates of a Craig-Bampton model),
 Elements, inputs, outputs and sensors attach to an interface node as to a point of a rigid body: the point is the
 node's coordinates (body frame, relative to the body's ``position``) and the motion there is the node's DOFs.
 Sensors and outputs may also sit on *interior* nodes that a recovery matrix maps from the body's coordinates.
+A point that moves with an axis (an element's, an input's, an output's or a sensor's) travels along a line of
+interface nodes (:class:`NodeLine`).
 A point *offset* from a node (``{node: NAME, offset: [dx, dy, dz]}`` in a model file) hangs on it by a massless
 rigid link: its displacement is ``u + theta x d`` from the node's translations ``u`` and rotations ``theta``, its
 rotation the node's (the node needs the rotational DOFs the cross product takes).

@@ -1316,14 +1316,10 @@ class StructureBuilder:
         self._check_on_node(body, point, where, interior=interior)
         return point
 
-    def _check_on_line(self, flex: FlexibleBody, point: Vector3, where: str, *, interior: bool) -> None:
-        """A point on a flexible body that moves with an axis must travel along one of its lines of nodes, inside
-        the line at every listed axis position."""
+    def _check_on_line(self, flex: FlexibleBody, point: Vector3, where: str) -> None:
+        """A point on a flexible body that moves with an axis (an element's, an input's, an output's or a
+        sensor's) must travel along one of its lines of nodes, inside the line at every listed axis position."""
         shown_point = [str(v) for v in point]
-        if interior:
-            msg = (f"sensors and outputs sit on fixed nodes of flexible body {flex.name!r}; got {shown_point} "
-                   f"({where})")
-            raise ModelError(msg)
         found = flex.line_through(point, self._evaluation_points())
         if found is None:
             lines = ", ".join(line.name for line in flex.lines) or "none declared"
@@ -1351,7 +1347,7 @@ class StructureBuilder:
         except TypeError:
             coords = None
         if coords is None:
-            self._check_on_line(flex, point, where, interior=interior)
+            self._check_on_line(flex, point, where)
             return
         linked = flex.offset_at(coords)
         if linked is not None:
