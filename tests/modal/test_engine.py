@@ -327,10 +327,11 @@ def test_empty_sensor_list_is_a_model_error():
         ModalEngine(load_model("builtin:two-mass-rig"), sensors=[])
 
 
-def _flexible_with_dense_rows(n: int = 7) -> NumericModel:
+def _flexible_with_dense_rows(n: int = 7, *, varying_mass: bool = False) -> NumericModel:
     """A 30 kg block on a free-free steel beam (``n`` nodes) on two mounts: the beam's loss factor gives dense rank-one
     damping rows and a sensor between two nodes reads a dense recovery row (the engine's BLAS path). The beam's
-    mass falls into blocks of 2 n DOFs (axial, torsion, two bending planes): with 13 nodes their L^-T is dense too."""
+    mass falls into blocks of 2 n DOFs (axial, torsion, two bending planes): with 13 nodes their L^-T is dense too.
+    With ``varying_mass`` the beam's mass scale ``s_m`` and the block's mass ``mb`` are parameters."""
     from cappe.model.fe import BeamSection, frame_model
 
     nodes = np.c_[np.linspace(0, 1.2, n), np.zeros(n), np.zeros(n)]
@@ -342,13 +343,18 @@ def _flexible_with_dense_rows(n: int = 7) -> NumericModel:
     b.parameter("k", 2.0e7, kind="stiffness")
     b.parameter("s_k", 1.0, kind="other")
     b.parameter("eta", 0.01, kind="loss")
+    if varying_mass:
+        b.parameter("s_m", 1.0, kind="other")
+        b.parameter("mb", 30.0, kind="mass")
     b.flexible_body("beam", mass=fm.mass, stiffness=fm.stiffness, stiffness_scale="s_k", damping={"loss": "eta"},
+                    mass_scale="s_m" if varying_mass else 1,
                     nodes=[{"name": f"n{i}", "at": [float(x), 0.0, 0.0]} for i, x in enumerate(nodes[:, 0])],
                     recovery={"matrix": rec, "nodes": [{"name": "mid", "at": [0.55, 0.0, 0.0], "dofs": ["x", "y", "z"]}]})
     for name, x in (("left", 0.0), ("right", 1.2)):
         b.element(name, bodies=["ground", "beam"], at=[x, 0, 0],
                   stiffness={d: "k" for d in ("x", "y", "z", "rx", "ry", "rz")}, damping={"y": 300.0})
-    b.body("block", mass=30.0, inertia={"xx": 0.2, "yy": 0.2, "zz": 0.2}, position=[0.6, 0.0, 0.1])
+    b.body("block", mass="mb" if varying_mass else 30.0, inertia={"xx": 0.2, "yy": 0.2, "zz": 0.2},
+           position=[0.6, 0.0, 0.1], com=[0.01, 0.02, 0.03])
     b.element("mount", bodies=["beam", "block"], at=[0.6, 0, 0],
               stiffness={d: "k" for d in ("x", "y", "z", "rx", "ry", "rz")})
     b.sensor("mid", body="beam", point="mid")
@@ -425,3 +431,51 @@ def test_a_flexible_body_is_projected_without_forming_its_shapes_and_gives_the_n
         np.testing.assert_allclose(fused.frequency[i], omega / (2 * np.pi), rtol=1e-9)
         shapes = model.sensor_matrix()[1] @ phi
         np.testing.assert_allclose(np.abs(fused.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())
+
+
+@pytest.mark.parametrize("n", [7, 13])
+def test_varying_masses_on_a_flexible_body_scale_the_nominal_factor_and_give_the_numpy_modes(n, monkeypatch):
+    # a flexible body's mass block is s_m M_fe: its Cholesky factor is the nominal one times sqrt(s_m / s_m,nom), and
+    # a rigid body's 6 x 6 block takes S_b = L_b^-1 L_b,nom; no sample factors its own M (the dense 121^3 products
+    # per sample on the flexible-bed machine tool before)
+    from cappe.modal._engine import _MassReduction
+
+    model = _flexible_with_dense_rows(n, varying_mass=True)
+    params = random_params(model, 7, seed=11)
+    params[:, model.parameter_names.index("eta")] = 0.01
+    params[2] = model.nominal  # nominal masses beside varying ones in one chunk
+    params[4, model.parameter_names.index("s_m")] = 1.0
+    params[4, model.parameter_names.index("mb")] = 30.0
+    reference = ModalEngine(model, n_workers=1, chunk_size=7).evaluate(params, contributions=True, full_shapes=True)
+
+    def refused(self, *args):  # noqa: ARG001 (the signature of the method it replaces)
+        msg = "a sample factored its own mass matrix"
+        raise AssertionError(msg)
+
+    monkeypatch.setattr(_MassReduction, "__init__", refused)
+    batch = ModalEngine(model, n_workers=1, chunk_size=7).evaluate(params, contributions=True)
+    for chunk in (1, 3):  # the same bits in any chunk
+        parts = ModalEngine(model, chunk_size=chunk, n_workers=1).evaluate(params, contributions=True)
+        for name in ("frequency", "damping", "shapes", "contributions", "damping_gradient"):
+            np.testing.assert_array_equal(getattr(parts, name), getattr(batch, name), err_msg=f"{name} {chunk}")
+    np.testing.assert_allclose(batch.shapes, reference.shapes, rtol=1e-9, atol=1e-12 * np.abs(batch.shapes).max())
+    exact = ModalEngine(model, n_workers=1, chunk_size=7).evaluate(params[:3], exact=True)
+    tracked = ModalEngine(model, n_workers=1, chunk_size=7).evaluate(params, track=True)
+    # tracking orders the modes as the nominal reference does: the same set
+    np.testing.assert_allclose(np.sort(tracked.frequency, axis=1), batch.frequency, rtol=1e-9)
+    for i in range(len(params)):
+        system = model.system(params[i])
+        lam, phi = scipy.linalg.eigh(system.K, system.M)
+        omega = np.sqrt(lam)
+        zeta = (np.einsum("ij,ik,kj->j", phi, system.C, phi) / (2 * omega)
+                + np.einsum("ij,ik,kj->j", phi, system.H, phi) / (2 * omega**2))
+        # rtol: the same tolerances as the known-mass path's test above (rounding of the reductions, 1e-13 measured)
+        np.testing.assert_allclose(batch.frequency[i], omega / (2 * np.pi), rtol=1e-9)
+        np.testing.assert_allclose(batch.damping[i], zeta, rtol=1e-8, atol=1e-12)
+        shapes = model.sensor_matrix()[1] @ phi
+        np.testing.assert_allclose(np.abs(batch.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())
+        full = reference.full_shapes[i]
+        np.testing.assert_allclose(np.abs(full), np.abs(phi), rtol=1e-7, atol=1e-9 * np.abs(phi).max())
+        if i < 3:
+            ref = system.modes("exact")
+            np.testing.assert_allclose(np.sort_complex(exact.poles[i]), np.sort_complex(ref.poles), rtol=1e-9)

@@ -494,7 +494,8 @@ class ModalEngine:
         return cached
 
     def _reduce(self, pb: Array, position: Mapping[str, float] | None, exact: bool,
-                offset: int) -> tuple[dict[str, Array], _MassReduction | _Reductions, Array, NDArray[np.intp] | None]:
+                offset: int) -> tuple[dict[str, Array], _MassReduction | _Reductions | _ScaledReduction, Array,
+                                      NDArray[np.intp] | None]:
         """The matrices the chunk needs (all five with ``exact``, else none or M and K), the reduction of each sample,
         the reduced stiffness ``L^-1 K L^-T`` and, where samples repeat one another's stiffness, the sample each
         row of the reduced stiffness stands for.
@@ -514,6 +515,13 @@ class ModalEngine:
         groups = self._mass_groups(position)
         nominal = self._nominal_reduction(position) if model.is_affine else None
         shared = None if nominal is None else nominal.shares_mass(pb)
+        if shared is not None and not shared.all():
+            assert nominal is not None  # shared is only set with a nominal reduction
+            scaled = _ScaledReduction.of(nominal, pb, shared)
+            if scaled is not None:
+                mats = model.matrices(pb, position) if exact else {}
+                reduced = scaled.reduce(nominal.reduce(model.affine_terms(("K",), pb, position)["K"][0]))
+                return mats, scaled, reduced, None
         if shared is None or not shared.any():
             mats = model.matrices(pb, position, names=MATRIX_NAMES if exact else ("M", "K"))
             reduction = _MassReduction(mats["M"], groups, offset)
@@ -610,14 +618,18 @@ class ModalEngine:
         flat: Array | None = None
         phi: Array | None = None
         sources = model.damping_sources(pb, position, jacobian=contributions)
-        nominal = None  # the chunk's reduction where every sample takes the nominal one and nothing is tracked
-        if track is None and isinstance(reduction, _Reductions) and reduction.other is None:
+        # the chunk's reduction where every sample takes the nominal one (or the nominal one after a block-diagonal
+        # S of its own: L^-T v = L_nom^-T (S^T v), _ScaledReduction) and nothing is tracked
+        nominal: _Reductions | _ScaledReduction | None = None
+        if track is None and (isinstance(reduction, _ScaledReduction)
+                              or (isinstance(reduction, _Reductions) and reduction.other is None)):
             nominal = reduction
+        base = reduction.premultiply(vectors) if isinstance(reduction, _ScaledReduction) else vectors
         fused = None
         if nominal is not None and not (full or exact or self._dof_channels) and sources.rows.ndim == 2:
             fused = self._fused_rows(position, self._sensor_rows(position)[1], sources.rows)
         if nominal is not None and fused is None:
-            flat = nominal.nominal.flat_shapes(vectors)
+            flat = nominal.nominal.flat_shapes(base)
         elif nominal is None:
             phi = reduction.shapes(vectors)
         if track is not None:
@@ -635,8 +647,8 @@ class ModalEngine:
             if shapes is not None:
                 return shapes
             if flat_shapes is None:  # the fused rows' path: L^-T v not formed yet
-                assert isinstance(reduction, _Reductions)
-                flat_shapes = reduction.nominal.flat_shapes(vectors)
+                assert isinstance(reduction, (_Reductions, _ScaledReduction))
+                flat_shapes = reduction.nominal.flat_shapes(base)
             return _unflatten(flat_shapes, m)
 
         if repeats is not None and sources.rows.ndim == 3:  # elongation rows per sample: hand the modes out first
@@ -656,7 +668,7 @@ class ModalEngine:
                 # a flexible body: one dense BLAS product per sample each, (n_s, n) @ (n, m) and (n_src, n) @ (n, m)
                 # (measured on the flexible-bed machine tool: 0.6 of the time of splitting the rows into sparse and
                 # dense ones, gathering the dense ones' columns and scattering the results)
-                shapes, elongation = fused[0] @ vectors, fused[1] @ vectors
+                shapes, elongation = fused[0] @ base, fused[1] @ base
             else:
                 if flat is None:
                     flat = _flatten(shapes_of(flat, phi))
@@ -959,6 +971,110 @@ class _Reductions:
         if self.other is not None:
             out[~self.shared] = self.other.inverse_mass()
         return out
+
+
+class _ScaledReduction:
+    """The reduction of samples whose M differs from the nominal one by a block-diagonal factor: ``L = L_nom S^-1``.
+
+    A flexible body's mass block is ``s_m M_fe``: with its scale ``s_m`` varying (an unknown), its Cholesky factor is
+    the nominal one times ``sqrt(s_m / s_m,nom)``, so ``S`` is a number on that block; a rigid body's 6 x 6 block
+    takes ``S_b = L_b^-1 L_b,nom`` (two small factorizations). The sample's reduced stiffness is then
+    ``S (L_nom^-1 K L_nom^-T) S^T`` from the nominal reduction's patterns (no assembly of K, no factorization of the
+    dense block, O(n^2) per sample instead of the two dense O(n^3) products of :class:`_MassReduction`) and its shapes
+    ``L_nom^-T (S^T v)``: the nominal path's fused rows apply. Taken only on models with a flexible body (rigid
+    ones keep :class:`_MassReduction`'s block products) where every large mass block of the chunk is a multiple of
+    its nominal one (the samples with the nominal M take ``S = I``, exactly).
+    """
+
+    #: Blocks larger than this must be multiples of their nominal ones (a rigid body's are at most 6 x 6).
+    SMALL = 6
+
+    def __init__(self, nominal: _NominalReduction, scalars: list[tuple[NDArray[np.intp], Array]],
+                 blocks: list[tuple[NDArray[np.intp], Array]]) -> None:
+        self.nominal = nominal
+        self.scalars = scalars  # per group of large blocks: DOFs (n_blocks, s) and each sample's factor (B, n_blocks)
+        self.blocks = blocks  # per group of small blocks: DOFs (n_blocks, s) and S_b (B, n_blocks, s, s)
+
+    @classmethod
+    def of(cls, nominal: _NominalReduction, params: Array, shared: NDArray[np.bool_]) -> _ScaledReduction | None:
+        """The scaled reduction of the samples ``params`` (B, n_params), or None where it does not apply."""
+        model = nominal.model
+        if not model.structure.flexible_bodies:
+            return None
+        try:
+            nominal.factor()
+        except ModelError:
+            return None
+        mass = model.matrices(params, nominal.position, names=("M",))["M"]
+        reference = model.matrices(nominal.nominal[None, :], nominal.position, names=("M",))["M"][0]
+        scalars: list[tuple[NDArray[np.intp], Array]] = []
+        blocks: list[tuple[NDArray[np.intp], Array]] = []
+        for group in nominal.groups:
+            rows, cols = group[:, :, None], group[:, None, :]
+            own, ref = mass[:, rows, cols], reference[rows, cols]  # (B, nb, s, s), (nb, s, s)
+            if group.shape[1] <= cls.SMALL:
+                ref_l = np.linalg.cholesky(ref)
+                try:
+                    factor = np.linalg.inv(np.linalg.cholesky(own)) @ ref_l
+                except np.linalg.LinAlgError:
+                    return None  # not positive definite: the samples' own factorization names them
+                factor[shared] = np.eye(group.shape[1])
+                blocks.append((group, factor))
+                continue
+            # the ratio of one entry, the largest diagonal one (a sum over the diagonal is ordered by the batch's
+            # layout: its last bits would depend on the chunk)
+            pivot = np.argmax(np.diagonal(ref, axis1=1, axis2=2), axis=1)
+            blocks_at = np.arange(group.shape[0])
+            ratio = own[:, blocks_at, pivot, pivot] / ref[blocks_at, pivot, pivot]
+            size = np.abs(ref).max(axis=(1, 2))
+            off = np.abs(own - ratio[:, :, None, None] * ref).max(axis=(2, 3))
+            if (off > 1e-13 * size).any() or (ratio <= 0).any():
+                return None
+            factor = 1.0 / np.sqrt(ratio)
+            factor[shared] = 1.0
+            scalars.append((group, factor))
+        return cls(nominal, scalars, blocks)
+
+    def reduce(self, lower: Array) -> Array:
+        """``S A S^T`` (B, n, n) from the lower triangle of ``A = L_nom^-1 K L_nom^-T`` (what
+        :meth:`_NominalReduction.reduce` gives)."""
+        out = lower + np.swapaxes(np.tril(lower, -1), 1, 2)
+        b, n, _ = out.shape
+        if self.scalars:
+            d = np.ones((b, n))
+            for group, factor in self.scalars:
+                d[:, group] = factor[:, :, None]
+            out *= d[:, :, None]
+            out *= d[:, None, :]
+        for group, factor in self.blocks:
+            nb, s = group.shape
+            idx = group.ravel()
+            out[:, idx, :] = (factor @ out[:, idx, :].reshape(b, nb, s, n)).reshape(b, nb * s, n)
+            out[:, :, idx] = (out[:, :, idx].reshape(b, n, nb, s).transpose(0, 2, 1, 3)
+                              @ np.swapaxes(factor, 2, 3)).transpose(0, 2, 1, 3).reshape(b, n, nb * s)
+        return out
+
+    def premultiply(self, vectors: Array) -> Array:
+        """``S^T v`` (B, n, m), C-contiguous."""
+        out = np.array(vectors, order="C")
+        b, _, m = out.shape
+        for group, factor in self.scalars:
+            out[:, group.ravel(), :] *= np.repeat(factor, group.shape[1], axis=1)[:, :, None]
+        for group, factor in self.blocks:
+            nb, s = group.shape
+            idx = group.ravel()
+            out[:, idx, :] = (np.swapaxes(factor, 2, 3) @ out[:, idx, :].reshape(b, nb, s, m)).reshape(b, nb * s, m)
+        return out
+
+    def shapes(self, vectors: Array) -> Array:
+        return self.nominal.shapes(self.premultiply(vectors))
+
+    def inverse_mass(self) -> Array:
+        """``L^-T L^-1`` (B, n, n)."""
+        n = self.nominal.model.n_dof
+        b = (self.scalars[0][1] if self.scalars else self.blocks[0][1]).shape[0]
+        linv_t = self.shapes(np.broadcast_to(np.eye(n), (b, n, n)))
+        return np.asarray(linv_t @ np.swapaxes(linv_t, 1, 2))
 
 
 def _inverse_cholesky(mass: Array, groups: list[NDArray[np.intp]], offset: int) -> Array:
