@@ -877,6 +877,44 @@ class _NominalReduction:
         self._mass_columns = [model.parameter_names.index(p) for p in model.matrix_parameters("M")]
         self._stiffness_columns = [model.parameter_names.index(p) for p in model.matrix_parameters("K")]
         self._factor: tuple[_Projection, NDArray[np.intp], Any, Array, Array] | None = None
+        self._scale_plan: tuple[list[tuple[NDArray[np.intp], str, Any, Any]] | None] | None = None
+
+    def scale_plan(self) -> list[tuple[NDArray[np.intp], str, Any, Any]] | None:
+        """How a sample's mass blocks relate to the nominal ones (:class:`_ScaledReduction`), per group of blocks:
+        ``(group, "scalar", term per block, its nominal coefficient per block)`` where every block is one term's
+        (a flexible body's ``s_m M_fe``), ``(group, "blocks", the terms' patterns on the blocks (n_terms, nb, s, s),
+        the nominal ``L_b`` (nb, s, s))`` for rigid bodies' small blocks. None where it does not apply: a model
+        without flexible bodies, a large block of several terms, small blocks that are not the first DOFs (a
+        lumped-mass flexible body beside another), a nominal M that is not positive definite."""
+        if self._scale_plan is None:
+            self._scale_plan = (self._make_scale_plan(),)
+        return self._scale_plan[0]
+
+    def _make_scale_plan(self) -> list[tuple[NDArray[np.intp], str, Any, Any]] | None:
+        model = self.model
+        if not model.structure.flexible_bodies:
+            return None
+        try:
+            self._factored()
+        except ModelError:
+            return None
+        coefficients, patterns = model.affine_terms(("M",), self.nominal[None, :], self.position)["M"]
+        plan: list[tuple[NDArray[np.intp], str, Any, Any]] = []
+        for group in self.groups:
+            on_blocks = patterns[:, group[:, :, None], group[:, None, :]]  # (n_terms, nb, s, s)
+            if group.shape[1] <= _ScaledReduction.SMALL:
+                nominal = np.einsum("t,tkij->kij", coefficients[0], on_blocks)
+                plan.append((group, "blocks", on_blocks, np.linalg.cholesky(nominal)))
+                continue
+            touching = np.any(on_blocks != 0, axis=(2, 3))  # (n_terms, nb)
+            if not (touching.sum(axis=0) == 1).all():
+                return None
+            terms = np.argmax(touching, axis=0)
+            plan.append((group, "scalar", terms, coefficients[0, terms]))
+        small = [group.ravel() for group, kind, _, _ in plan if kind == "blocks"]
+        if small and not np.array_equal(np.sort(np.concatenate(small)), np.arange(sum(g.size for g in small))):
+            return None  # the small blocks' DOFs are not the first ones (see _ScaledReduction.reduce)
+        return plan
 
     def shares_mass(self, params: Array) -> NDArray[np.bool_]:
         """Which samples (B, n_params) have the nominal M: their mass parameters equal the nominal values."""
@@ -998,73 +1036,72 @@ class _ScaledReduction:
     @classmethod
     def of(cls, nominal: _NominalReduction, params: Array, shared: NDArray[np.bool_]) -> _ScaledReduction | None:
         """The scaled reduction of the samples ``params`` (B, n_params), or None where it does not apply."""
-        model = nominal.model
-        if not model.structure.flexible_bodies:
+        plan = nominal.scale_plan()
+        if plan is None:
             return None
-        try:
-            nominal.factor()
-        except ModelError:
-            return None
-        mass = model.matrices(params, nominal.position, names=("M",))["M"]
-        reference = model.matrices(nominal.nominal[None, :], nominal.position, names=("M",))["M"][0]
+        coefficients = nominal.model.affine_terms(("M",), params, nominal.position)["M"][0]  # (B, n_terms)
         scalars: list[tuple[NDArray[np.intp], Array]] = []
         blocks: list[tuple[NDArray[np.intp], Array]] = []
-        for group in nominal.groups:
-            rows, cols = group[:, :, None], group[:, None, :]
-            own, ref = mass[:, rows, cols], reference[rows, cols]  # (B, nb, s, s), (nb, s, s)
-            if group.shape[1] <= cls.SMALL:
-                ref_l = np.linalg.cholesky(ref)
-                try:
-                    factor = np.linalg.inv(np.linalg.cholesky(own)) @ ref_l
-                except np.linalg.LinAlgError:
+        for group, kind, data, reference in plan:
+            if kind == "scalar":  # each block is c_t P_t of one term t: L = sqrt(c_t / c_t,nom) L_nom
+                ratio = coefficients[:, data] / reference
+                if (ratio <= 0).any():
                     return None  # not positive definite: the samples' own factorization names them
-                factor[shared] = np.eye(group.shape[1])
-                blocks.append((group, factor))
+                factor = 1.0 / np.sqrt(ratio)
+                factor[shared] = 1.0
+                scalars.append((group, factor))
                 continue
-            # the ratio of one entry, the largest diagonal one (a sum over the diagonal is ordered by the batch's
-            # layout: its last bits would depend on the chunk)
-            pivot = np.argmax(np.diagonal(ref, axis1=1, axis2=2), axis=1)
-            blocks_at = np.arange(group.shape[0])
-            ratio = own[:, blocks_at, pivot, pivot] / ref[blocks_at, pivot, pivot]
-            size = np.abs(ref).max(axis=(1, 2))
-            off = np.abs(own - ratio[:, :, None, None] * ref).max(axis=(2, 3))
-            if (off > 1e-13 * size).any() or (ratio <= 0).any():
+            own = np.zeros((params.shape[0], *data.shape[1:]))
+            for t in range(data.shape[0]):  # a fixed-order sum: the same bits in any chunk
+                if data[t].any():
+                    own += coefficients[:, t, None, None, None] * data[t]
+            try:
+                factor = np.linalg.inv(np.linalg.cholesky(own)) @ reference
+            except np.linalg.LinAlgError:
                 return None
-            factor = 1.0 / np.sqrt(ratio)
-            factor[shared] = 1.0
-            scalars.append((group, factor))
+            factor[shared] = np.eye(group.shape[1])
+            blocks.append((group, factor))
         return cls(nominal, scalars, blocks)
 
     def reduce(self, lower: Array) -> Array:
         """``S A S^T`` (B, n, n) from the lower triangle of ``A = L_nom^-1 K L_nom^-T`` (what
-        :meth:`_NominalReduction.reduce` gives)."""
-        out = lower + np.swapaxes(np.tril(lower, -1), 1, 2)
+        :meth:`_NominalReduction.reduce` gives; the upper triangle is zero)."""
+        out = lower
         b, n, _ = out.shape
+        if self.blocks:
+            # the small blocks' DOFs come first (rigid bodies; :meth:`_NominalReduction.scale_plan`): their rows in
+            # full (the upper part from the lower triangle's columns) are all the row mixing reads, and the column
+            # mixing reads the lower triangle only
+            r = sum(group.size for group, _ in self.blocks)
+            out[:, :r, :] += np.swapaxes(np.tril(lower[:, :, :r], -1), 1, 2)
         if self.scalars:
-            d = np.ones((b, n))
-            for group, factor in self.scalars:
-                d[:, group] = factor[:, :, None]
+            d = self._scale(b, n)
             out *= d[:, :, None]
             out *= d[:, None, :]
         for group, factor in self.blocks:
             nb, s = group.shape
-            idx = group.ravel()
+            idx = _as_slice(group.ravel())
             out[:, idx, :] = (factor @ out[:, idx, :].reshape(b, nb, s, n)).reshape(b, nb * s, n)
             out[:, :, idx] = (out[:, :, idx].reshape(b, n, nb, s).transpose(0, 2, 1, 3)
                               @ np.swapaxes(factor, 2, 3)).transpose(0, 2, 1, 3).reshape(b, n, nb * s)
         return out
 
+    def _scale(self, b: int, n: int) -> Array:
+        """Per sample and DOF the number of the scalar blocks (1 elsewhere), (B, n)."""
+        d = np.ones((b, n))
+        for group, factor in self.scalars:
+            d[:, group] = factor[:, :, None]
+        return d
+
     def premultiply(self, vectors: Array) -> Array:
         """``S^T v`` (B, n, m), C-contiguous."""
-        out = np.array(vectors, order="C")
-        b, _, m = out.shape
-        for group, factor in self.scalars:
-            out[:, group.ravel(), :] *= np.repeat(factor, group.shape[1], axis=1)[:, :, None]
+        b, n, m = vectors.shape
+        out = vectors * self._scale(b, n)[:, :, None] if self.scalars else np.array(vectors, order="C")
         for group, factor in self.blocks:
             nb, s = group.shape
-            idx = group.ravel()
+            idx = _as_slice(group.ravel())
             out[:, idx, :] = (np.swapaxes(factor, 2, 3) @ out[:, idx, :].reshape(b, nb, s, m)).reshape(b, nb * s, m)
-        return out
+        return np.ascontiguousarray(out)
 
     def shapes(self, vectors: Array) -> Array:
         return self.nominal.shapes(self.premultiply(vectors))
@@ -1075,6 +1112,13 @@ class _ScaledReduction:
         b = (self.scalars[0][1] if self.scalars else self.blocks[0][1]).shape[0]
         linv_t = self.shapes(np.broadcast_to(np.eye(n), (b, n, n)))
         return np.asarray(linv_t @ np.swapaxes(linv_t, 1, 2))
+
+
+def _as_slice(index: NDArray[np.intp]) -> NDArray[np.intp] | slice:
+    """A run of consecutive indices as a slice (a view, no gather and scatter: the rigid bodies' DOFs come first)."""
+    if index.size and np.array_equal(index, np.arange(index[0], index[0] + index.size)):
+        return slice(int(index[0]), int(index[0]) + index.size)
+    return index
 
 
 def _inverse_cholesky(mass: Array, groups: list[NDArray[np.intp]], offset: int) -> Array:
