@@ -95,11 +95,13 @@ def test_serve_answers(monitored: Path, capsys, monkeypatch) -> None:
     import cappe.monitor as monitor_api
 
     started = {}
+    ready = threading.Event()
     real = monitor_api.make_server
 
     def capture(*args, **kwargs):
         server = real(*args, **kwargs)
         started["server"] = server
+        ready.set()
         return server
 
     monkeypatch.setattr(monitor_api, "make_server", capture)
@@ -107,10 +109,11 @@ def test_serve_answers(monitored: Path, capsys, monkeypatch) -> None:
             "--allowed-host", "spindle-pc.example.org"]
     thread = threading.Thread(target=main, args=(argv,), daemon=True)
     thread.start()
-    for _ in range(200):
-        if "server" in started:
-            break
-        time.sleep(0.05)
+    # a generous bound, not a pace (a fixed 10 s could run out on a loaded CI machine); a command that ends
+    # without a server stops the wait at once
+    deadline = time.monotonic() + 120
+    while not ready.wait(0.05) and thread.is_alive() and time.monotonic() < deadline:
+        pass
     assert "server" in started, "cappe monitor serve did not start a server"
     server = started["server"]
     try:
