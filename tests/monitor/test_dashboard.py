@@ -604,9 +604,10 @@ def test_page_in_chromium(server: DashboardServer, store: HistoryStore, tmp_path
     sync_playwright = _chromium()
     errors: list[str] = []
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, timeout=HUNG * 1000)
         try:
             page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page.set_default_timeout(HUNG * 1000)  # playwright's 30 s: a guard, not a speed bound
             page.on("pageerror", lambda exc: errors.append(f"page error: {exc}"))
             page.on("console", lambda m: errors.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
             page.on("response", lambda r: errors.append(f"HTTP {r.status}: {r.url}") if r.status >= 400 else None)
