@@ -7,8 +7,15 @@ from collections import OrderedDict
 from pathlib import Path
 
 import pytest
+from hypothesis import HealthCheck, settings
 
 from cappe.model import load_model
+
+# Hypothesis times its examples and its data generation by the wall clock: on a loaded CI machine (two workers,
+# other jobs beside them) a fast example can take seconds. Neither is a property of cappe, so neither fails a
+# test; the tests bound what they must bound themselves (CPU time: tests/cli/test_fuzz_inputs.py).
+settings.register_profile("cappe", deadline=None, suppress_health_check=[HealthCheck.too_slow])
+settings.load_profile("cappe")
 
 
 def pytest_configure(config: pytest.Config) -> None:

@@ -11,6 +11,6 @@ import pytest
 @pytest.mark.parametrize("module", ["cappe", "cappe.cli"])
 def test_module_entry_points_run_the_command(module):
     result = subprocess.run([sys.executable, "-m", module, "--version"], capture_output=True, text=True,
-                            check=False, timeout=60)
+                            check=False, timeout=300)
     assert result.returncode == 0, result.stderr
     assert result.stdout.startswith("cappe ")

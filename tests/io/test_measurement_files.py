@@ -148,7 +148,8 @@ def test_foreign_csv_headers_are_accepted(tmp_path):
     assert frf.H[0, 0, 0] == 2 + 3j
 
 
-@settings(max_examples=30, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=30, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # too_slow: wall clock
 @given(
     names=st.lists(st.text(alphabet=st.characters(blacklist_categories=("Cs",), blacklist_characters="\x00\r\n"),
                            min_size=1, max_size=12), min_size=1, max_size=4, unique=True),

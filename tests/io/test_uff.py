@@ -626,7 +626,8 @@ def test_failed_write_keeps_the_old_file(tmp_path, monkeypatch):
     assert [p.name for p in tmp_path.iterdir()] == ["run.uff"]
 
 
-@settings(max_examples=25, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@settings(max_examples=25, deadline=None,
+          suppress_health_check=[HealthCheck.function_scoped_fixture, HealthCheck.too_slow])  # too_slow: wall clock
 @given(
     names=st.lists(st.text(min_size=1, max_size=20).filter(lambda s: len(json.dumps(s)) <= 80), min_size=1, max_size=4, unique=True),
     values=st.lists(st.floats(allow_nan=False, allow_infinity=False, width=64), min_size=2, max_size=12),

@@ -215,16 +215,16 @@ def _texts(draw: st.DrawFn) -> str:
 @settings(max_examples=400, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(text=st.one_of(_texts(), st.text(max_size=60)))
 def test_no_text_is_ever_run(text, tmp_path_factory):
-    start = time.perf_counter()
+    start = time.process_time()  # this process's CPU time: the bound holds on a loaded machine too
     result = _parse_watched(text, ["k"])
-    elapsed = time.perf_counter() - start
+    elapsed = time.process_time() - start
     assert not _EVENTS, (text, _EVENTS)
     assert isinstance(result, (sp.Expr, ModelError)), (text, result)
     if isinstance(result, ModelError):
         message = str(result)
         assert message.endswith("(model.yaml, bodies[0].mass)")
         assert "\n" not in message.replace("\\n", "")
-    assert elapsed < 2.0, (text, elapsed)  # bounded work: no expression may take seconds
+    assert elapsed < 2.0, (text, elapsed)  # bounded work: no expression may take CPU seconds
 
 
 @settings(max_examples=150, deadline=None)

@@ -35,6 +35,9 @@ OTHER = "spindle-02"  # configured, nothing measured yet
 COMPONENTS = {"front": "front bearing", "rear": "rear bearing", "screw1": "housing screw 1",
               "screw2": "housing screw 2"}
 N_MEASUREMENTS = 30
+#: Seconds a request may take before the test calls the server hung: a guard, not a speed bound (a loaded CI
+#: machine answers in seconds what an idle one answers in milliseconds)
+HUNG = 120
 START = datetime(2024, 5, 1, 8, 0, tzinfo=UTC)
 FREQ = np.linspace(50.0, 2000.0, 240)
 MODES_HZ = np.array([420.0, 910.0, 1480.0])
@@ -143,7 +146,7 @@ def _request(url: str, method: str = "GET", headers: dict[str, str] | None = Non
     data = b"" if method == "POST" else None
     req = urllib.request.Request(url, method=method, headers=headers or {}, data=data)
     try:
-        with urllib.request.urlopen(req, timeout=10) as response:
+        with urllib.request.urlopen(req, timeout=HUNG) as response:
             return response.status, response.headers.get("Content-Type", ""), response.read()
     except urllib.error.HTTPError as err:
         with err:
@@ -284,7 +287,7 @@ def test_acknowledge_refuses_other_origins_and_get(server: DashboardServer, stor
 
 def _raw(server: DashboardServer, method: str, path: str, hosts: list[str]) -> tuple[int, str, bytes]:
     """A request with exactly these Host headers (none, one or several), which urllib cannot send."""
-    connection = http.client.HTTPConnection(server.host, server.port, timeout=10)
+    connection = http.client.HTTPConnection(server.host, server.port, timeout=HUNG)
     try:
         connection.putrequest(method, path, skip_host=True, skip_accept_encoding=True)
         for host in hosts:
@@ -494,7 +497,7 @@ def test_concurrent_requests(server: DashboardServer) -> None:
     for thread in threads:
         thread.start()
     for thread in threads:
-        thread.join(timeout=20)
+        thread.join(timeout=2 * HUNG)  # each request gives up after HUNG s
     assert results == [200] * 8
 
 
@@ -601,9 +604,10 @@ def test_page_in_chromium(server: DashboardServer, store: HistoryStore, tmp_path
     sync_playwright = _chromium()
     errors: list[str] = []
     with sync_playwright() as pw:
-        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS)
+        browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=CHROMIUM_ARGS, timeout=HUNG * 1000)
         try:
             page = browser.new_page(viewport={"width": 1320, "height": 900})
+            page.set_default_timeout(HUNG * 1000)  # playwright's 30 s: a guard, not a speed bound
             page.on("pageerror", lambda exc: errors.append(f"page error: {exc}"))
             page.on("console", lambda m: errors.append(f"console {m.type}: {m.text}") if m.type == "error" else None)
             page.on("response", lambda r: errors.append(f"HTTP {r.status}: {r.url}") if r.status >= 400 else None)

@@ -8,7 +8,6 @@ and a writer killed with SIGKILL in the middle of a transaction.
 from __future__ import annotations
 
 import contextlib
-import itertools
 import math
 import os
 import signal
@@ -331,21 +330,24 @@ def test_duplicate_source_is_refused_and_rolls_the_ingest_back(store):
 # A writer process. Each transaction reads the count from the state, records a measurement whose features and
 # estimates carry that count, pauses (widening the window in which a missing lock would lose an update) and
 # writes count + 1. It reports "added <source>" inside the transaction and "committed <id>" after the commit,
-# then waits `gap` seconds (ingests rarely come back to back; without a gap SQLite's busy handler, which polls
-# with growing sleeps, lets one writer run many times in a row). With `gated`, it also waits inside every
-# transaction, after "added", for a line on stdin: a kill then surely lands in the middle of a transaction.
+# then waits `gap` seconds. With `gated`, it also waits inside every transaction, after "added", for a line on
+# stdin: a kill then surely lands in the middle of a transaction. With `paced`, it waits for a line on stdin
+# before every transaction: the test then starts its own transaction and the writer's at the same moment.
 _WRITER = """
 import sys, time
 from datetime import UTC, datetime, timedelta
 from cappe.monitor._store import HistoryStore
 
 url, machine, tag = sys.argv[1:4]
-n, pause, gap, gated = int(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6]), sys.argv[7] == "gated"
+n, pause, gap, mode = int(sys.argv[4]), float(sys.argv[5]), float(sys.argv[6]), sys.argv[7]
+gated = mode == "gated"
 with HistoryStore(url) as store:
     print("ready", flush=True)
     sys.stdin.readline()
     i = 0
     while n < 0 or i < n:
+        if mode == "paced":
+            sys.stdin.readline()
         with store.transaction(machine) as tx:
             count = (tx.state() or {"count": 0})["count"]
             source = f"{tag}-{i}"
@@ -364,8 +366,8 @@ with HistoryStore(url) as store:
 """
 
 
-def _writer(url: str, tag: str, n: int, pause: float, gap: float, *, gated: bool = False) -> subprocess.Popen[str]:
-    arguments = [url, MACHINE, tag, str(n), str(pause), str(gap), "gated" if gated else "free"]
+def _writer(url: str, tag: str, n: int, pause: float, gap: float, *, mode: str = "free") -> subprocess.Popen[str]:
+    arguments = [url, MACHINE, tag, str(n), str(pause), str(gap), mode]
     return subprocess.Popen([sys.executable, "-c", _WRITER, *arguments], stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
 
@@ -387,45 +389,49 @@ def _assert_complete(store: HistoryStore) -> list[MeasurementRecord]:
 
 
 def test_concurrent_ingests_into_one_machine_are_serialized(store, url):
-    # this process and a writer process, 40 ingests each into the same machine at the same time
-    n = 40
-    # gaps of 30 ms, longer than most of SQLite's busy-handler sleeps (1 to 100 ms): a blocked writer then finds
-    # the lock free when it wakes, and neither writer starves the other (with 5 ms gaps the child once made all
-    # its 40 ingests while this process slept in the busy handler, on a loaded CI machine)
-    gap = 0.03
-    child = _writer(url, "child", n, 0.002, gap)
+    # this process and a writer process, 40 ingests each into the same machine, in rounds: in each round both
+    # start a transaction at the same moment (the writer on a line from this process), so one of them must wait
+    # for the other's lock; each transaction pauses 10 ms between reading the count and writing count + 1, the
+    # window in which a missing lock loses an update. The rounds make the interleaving certain whatever the load
+    # (free-running writers with fixed gaps once let one of them make all its ingests while the other slept in
+    # SQLite's busy handler, on a loaded CI machine).
+    n, pause = 40, 0.01
+    child = _writer(url, "child", n, pause, 0.0, mode="paced")
     try:
         assert child.stdout.readline() == "ready\n", child.stderr.read()
         child.stdin.write("go\n")
         child.stdin.flush()
         for i in range(n):
-            with store.transaction(MACHINE) as tx:
+            child.stdin.write("round\n")  # the writer starts its transaction now ...
+            child.stdin.flush()
+            with store.transaction(MACHINE) as tx:  # ... and this process its own
                 count = (tx.state() or {"count": 0})["count"]
                 mid = tx.add_measurement(timestamp=T0 + timedelta(seconds=count), source=f"parent-{i}",
                                          kind="operational")
-                time.sleep(0.002)
+                time.sleep(pause)
                 tx.add_features(mid, {"count": (float(count), None), "rms": (0.1, 0.01)})
                 tx.add_estimates(mid, path="factors", values={"k11": 1.0 + count, "k12": 0.9})
                 tx.set_state({"count": count + 1})
-            time.sleep(gap)
+            line = child.stdout.readline()
+            while line.startswith("added"):
+                line = child.stdout.readline()
+            assert line.startswith("committed"), line + child.stderr.read()  # the round ends with both done
         out, err = child.communicate(timeout=120)
     finally:
         with contextlib.suppress(ProcessLookupError):
             child.kill()
         child.wait()
     assert child.returncode == 0, err
-    assert out.count("committed") == n
     records = _assert_complete(store)
     assert len(records) == 2 * n
     assert store.counts(MACHINE) == {"measurements": 2 * n, "features": 4 * n, "estimates": 4 * n, "alarms": 0}
-    # the two really ran side by side: in id order the writer changes several times
-    writers = [r.source.split("-")[0] for r in sorted(records, key=lambda r: r.id)]
-    switches = sum(a != b for a, b in itertools.pairwise(writers))
-    assert switches >= 3, writers
+    # in id order, the records come in the rounds' pairs: one of each writer per round
+    sources = [r.source for r in sorted(records, key=lambda r: r.id)]
+    assert [sorted(sources[2 * i:2 * i + 2]) for i in range(n)] == [[f"child-{i}", f"parent-{i}"] for i in range(n)]
 
 
 def test_a_writer_killed_mid_transaction_leaves_only_whole_records(store, url):
-    writer = _writer(url, "k", -1, 0.01, 0.0, gated=True)
+    writer = _writer(url, "k", -1, 0.01, 0.0, mode="gated")
     watchdog = threading.Timer(60.0, writer.kill)  # never hang the suite on a stuck child
     watchdog.start()
     committed: list[int] = []

@@ -165,9 +165,10 @@ def test_html_player_buttons_show_their_icons_offline(tmp_path, plate):
     requests: list[str] = []
     with playwright.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=str(chromium), args=["--headless", "--no-sandbox",
-                                                                           "--disable-gpu"])
+                                                                           "--disable-gpu"], timeout=120_000)
         try:
             page = browser.new_page()
+            page.set_default_timeout(120_000)  # ms; playwright's 30 s could run out on a loaded CI machine
             page.route(re.compile(r"^https?://"), lambda route: (requests.append(route.request.url), route.abort()))
             page.goto(page_file.resolve().as_uri())
             buttons = page.locator(".anim-buttons button")

@@ -96,9 +96,10 @@ def test_page_renders_in_chromium(tmp_path):
     errors: list[str] = []
     with playwright.sync_playwright() as pw:
         browser = pw.chromium.launch(executable_path=str(CHROMIUM), args=["--headless", "--no-sandbox",
-                                                                           "--disable-gpu"])
+                                                                           "--disable-gpu"], timeout=120_000)
         try:
             page = browser.new_page(viewport={"width": 1200, "height": 900})
+            page.set_default_timeout(120_000)  # ms; playwright's 30 s could run out on a loaded CI machine
             page.on("pageerror", lambda e: errors.append(str(e)))
             page.goto(path.resolve().as_uri())
             widths = page.evaluate("Array.from(document.images).map(i => i.naturalWidth)")
