@@ -49,7 +49,7 @@ def setup(case: str, seed: int = 1, sensor_lag: float = 0.5) -> tuple[Monitor, S
     floor = ShopFloor(config, model, rng=np.random.default_rng(seed), sensor_lag=sensor_lag, **CASES[case])
     day = floor.run(96)
     baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
-                                      conditions=[m.conditions for m in day])
+                                      conditions=[m.conditions for m in day], frfs=[m.frf for m in day])
     return monitor, floor, baseline
 
 
