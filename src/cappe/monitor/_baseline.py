@@ -330,9 +330,10 @@ class Baseline:
         """Covariance the diagnosis sizes a change with and compares the hypotheses by.
 
         The charts' covariance (the healthy scatter and the resolution, both from the baseline's own data) divided by
-        ``weight``, plus the systematic part that grows with the change: ``(scale_i max|change|)^2`` on component
-        ``i``, ``scale_i`` its :meth:`component_scale_std` with what other components leak into it (a wrong
-        sensitivity also leaks part of a change into the other components).
+        ``weight``, plus the systematic part that grows with the change, on component ``i``: with the twin's errors
+        ``E`` (:attr:`size_error`) ``(SIZE_SCALE_FLOOR max|change|)^2 + sum_j (E_ij change_j)^2``, the error its
+        reading takes from the change of each component (its own, and what a wrong sensitivity leaks into it from
+        the others); without them ``(size_scale_std max|change|)^2`` on every component.
 
         Parameters
         ----------
@@ -345,9 +346,13 @@ class Baseline:
         -------
         ndarray, shape (n, n)
         """
-        scale = self.component_scale_std(leaked=True) * float(np.max(np.abs(np.asarray(change, dtype=float)),
-                                                                     initial=0.0))
-        return np.asarray(self.chart_covariance / weight + np.diag(scale**2), dtype=float)
+        delta = np.asarray(change, dtype=float)
+        largest = float(np.max(np.abs(delta), initial=0.0))
+        if self.size_error is None:
+            variance = np.full(len(self.names), (self.size_scale_std * largest) ** 2)
+        else:
+            variance = (SIZE_SCALE_FLOOR * largest) ** 2 + (self.size_error**2) @ (delta**2)
+        return np.asarray(self.chart_covariance / weight + np.diag(variance), dtype=float)
 
     @property
     def diagnosis_covariance(self) -> Array:

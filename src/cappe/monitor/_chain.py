@@ -1108,4 +1108,9 @@ def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95)
     if doc:
         baseline = Baseline.from_dict(doc)
         scale_std = float(baseline.component_scale_std()[list(baseline.names).index(fault)])
-    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level, scale_std=scale_std)
+    threshold = -limit if change[-1] < 0 else limit
+    if scale_std >= 0.2:  # the twin reads this component's sizes 20 % or more off: no crossing time can be told
+        nominal = forecast_crossing(hours, change, threshold, level=level)
+        return replace(nominal, lower=-np.inf, upper=np.inf, determined=False,
+                       reason=f"the model's twin reads {fault}'s changes {100 * scale_std:.2g} % of themselves off")
+    return forecast_crossing(hours, change, threshold, level=level, scale_std=scale_std)

@@ -59,6 +59,8 @@ class CrossingForecast:
         Points fitted.
     determined : bool
         Whether the interval is bounded (the trend is significant at ``level``).
+    reason : str
+        Why the time cannot be told, where that is not the trend's significance (empty otherwise).
     """
 
     threshold: float
@@ -70,6 +72,7 @@ class CrossingForecast:
     slope_std: float
     n: int
     determined: bool
+    reason: str = ""
 
     def covers(self, value: float) -> bool:
         """Whether ``value`` lies in the interval.
@@ -91,7 +94,7 @@ class CrossingForecast:
 
         return {"threshold": self.threshold, "time": finite(self.time), "lower": finite(self.lower),
                 "upper": finite(self.upper), "level": self.level, "slope": self.slope, "slope_std": self.slope_std,
-                "n": self.n, "determined": self.determined}
+                "n": self.n, "determined": self.determined, "reason": self.reason}
 
     def text(self, unit: str = "h", now: float = 0.0) -> str:
         """The forecast in words, times counted from ``now``.
@@ -108,6 +111,8 @@ class CrossingForecast:
         str
         """
         grade = f"{100 * self.threshold:+.0f} %"
+        if self.reason:
+            return f"reaches {grade}: cannot be told ({self.reason})"
         if not self.determined or self.time is None:
             return (f"reaches {grade}: cannot be told from {self.n} measurements (the trend "
                     f"{100 * self.slope:+.2g} %/{unit} +- {100 * self.slope_std:.2g} is not significant at "
