@@ -15,8 +15,11 @@ measurements) the diagnosis's stated numbers are compared with the truth:
 The constants of the size term (``SIZE_SCALE_FLOOR``, ``MODEL_OFFSET_FACTOR`` in cappe/monitor/_baseline.py) were
 chosen on a run with seed 1; the default seed 2 checks them on fresh data.
 
-``python -m benchmarks.bench_calibration [exact|mismatch] [TRIALS] [SEED]`` writes
-``benchmarks/results/calibration_<case>.json``.
+Small faults are where the diagnosis is least sure of itself: ``LARGEST`` (default 0.4) fills the reliability
+diagram's middle bins, which the full range leaves at 1 to 3 cases each.
+
+``python -m benchmarks.bench_calibration [exact|mismatch] [TRIALS] [SEED] [LARGEST]`` writes
+``benchmarks/results/calibration_<case>.json`` (``calibration_<case>_upto<LARGEST>.json`` for another largest size).
 """
 
 from __future__ import annotations
@@ -49,7 +52,7 @@ def setup(case: str, seed: int = 1, sensor_lag: float = 0.5) -> tuple[Monitor, S
     floor = ShopFloor(config, model, rng=np.random.default_rng(seed), sensor_lag=sensor_lag, **CASES[case])
     day = floor.run(96)
     baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
-                                      conditions=[m.conditions for m in day])
+                                      conditions=[m.conditions for m in day], frfs=[m.frf for m in day])
     return monitor, floor, baseline
 
 
@@ -66,12 +69,13 @@ def first_alarm(monitor: Monitor, baseline: Any, data: list[Any]) -> tuple[int, 
     return None
 
 
-def trials(monitor: Monitor, floor: ShopFloor, baseline: Any, n: int, rng: np.random.Generator) -> list[dict]:
-    """``n`` fault trials (see the module notes); one row each."""
+def trials(monitor: Monitor, floor: ShopFloor, baseline: Any, n: int, rng: np.random.Generator,
+           largest: float = LARGEST) -> list[dict]:
+    """``n`` fault trials (see the module notes; sizes up to ``largest``); one row each."""
     rows = []
     for t in range(n):
         fault = FAULTS[t % len(FAULTS)]
-        loss = float(np.exp(rng.uniform(np.log(SMALLEST), np.log(LARGEST))))
+        loss = float(np.exp(rng.uniform(np.log(SMALLEST), np.log(largest))))
         data = floor.run(8, fault=fault, loss=loss, fault_at=2)
         found = first_alarm(monitor, baseline, data)
         if found is None or found[0] < 2:
@@ -116,11 +120,13 @@ def main() -> None:
         case = sys.argv[1] if len(sys.argv) > 1 else "exact"
         n = int(sys.argv[2]) if len(sys.argv) > 2 else 140
         seed = int(sys.argv[3]) if len(sys.argv) > 3 else 2
+        largest = float(sys.argv[4]) if len(sys.argv) > 4 else LARGEST
         t0, c0 = time.perf_counter(), time.process_time()
         monitor, floor, baseline = setup(case, seed=seed)
-        rows = trials(monitor, floor, baseline, n, np.random.default_rng(100 + seed))
+        rows = trials(monitor, floor, baseline, n, np.random.default_rng(100 + seed), largest)
         summary = summarize(rows)
-        summary.update({"case": case, **CASES[case], "seed": seed, "size_scale_std": baseline.size_scale_std,
+        summary.update({"case": case, **CASES[case], "seed": seed, "largest": largest,
+                        "size_scale_std": baseline.size_scale_std,
                         "wall_s": time.perf_counter() - t0,
                         "cpu_s": time.process_time() - c0})
         print(f"{case}: {summary['detected']}/{summary['trials']} detected, true fault named "
@@ -131,7 +137,8 @@ def main() -> None:
             print(f"  stated {b['bin'][0]:.2f}-{b['bin'][1]:.2f}: mean {b['stated']:.3f}, observed "
                   f"{b['observed']:.3f} +- {b['se']:.3f} ({b['count']})")
         print(f"wall {summary['wall_s']:.0f} s, cpu {summary['cpu_s']:.0f} s")
-        print(f"wrote {write_results(f'calibration_{case}', [summary, *rows])}")
+        name = f"calibration_{case}" if largest == LARGEST else f"calibration_{case}_upto{largest:g}"
+        print(f"wrote {write_results(name, [summary, *rows])}")
 
 
 if __name__ == "__main__":

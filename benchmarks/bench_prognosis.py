@@ -12,13 +12,18 @@ The data come from cappe's scenario simulator (``scenario``, the default) or fro
 :class:`benchmarks._spindle_generator.ShopFloor` (numpy physics of its own, cold starts and warm-up) with the exact
 model (``exact``) or a machine 3 % heavier and 30 % more damped than its model (``mismatch``).
 
-``python -m benchmarks.bench_prognosis [N_SEQUENCES] [scenario|exact|mismatch]`` writes
-``benchmarks/results/prognosis.json`` (scenario) or ``prognosis_<case>.json``.
+The scale term is the baseline's :meth:`~cappe.monitor.Baseline.component_scale_std` of the component (from the
+machine's twin where the baseline has FRFs: the generator's cases; the offset rule on cappe's scenarios).
+
+``python -m benchmarks.bench_prognosis [N_SEQUENCES] [scenario|exact|mismatch] [COMPONENT]`` writes
+``benchmarks/results/prognosis.json`` (scenario) or ``prognosis_<case>.json`` (``_<component>`` appended for a
+``COMPONENT`` other than screw 3, the one that then loses ``RATE`` per measurement).
 """
 
 from __future__ import annotations
 
 import sys
+import time
 import warnings
 from datetime import UTC, datetime, timedelta
 
@@ -41,8 +46,10 @@ def main() -> None:
 
 
 def _main() -> None:
+    t0, c0 = time.perf_counter(), time.process_time()
     n_seq = int(sys.argv[1]) if len(sys.argv) > 1 else 200
     case = sys.argv[2] if len(sys.argv) > 2 else "scenario"
+    component = sys.argv[3] if len(sys.argv) > 3 else "screw3"
     n = 40  # measurements per sequence: 4 healthy, then the screw loosens by RATE per measurement
     if case == "scenario":
         model = NumericModel(load_model("builtin:spindle-bearing"))
@@ -55,7 +62,7 @@ def _main() -> None:
 
         def sequence(seq: int) -> list:
             start = START + timedelta(days=1, hours=float(np.random.default_rng(900 + seq).uniform(0, 24)))
-            return simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component="screw3",
+            return simulate_scenario(config, "loosening-screw", n=n, fault_at=4, component=component,
                                      severity=RATE * (n - 1 - 4), model=model, rng=1000 + seq, start=start)
     else:
         from benchmarks.bench_calibration import setup
@@ -63,10 +70,10 @@ def _main() -> None:
         monitor, floor, baseline = setup(case, seed=4)
 
         def sequence(seq: int) -> list:
-            return floor.run(n, fault="screw3", loss=RATE * np.clip(np.arange(n) - 4, 0, None), fault_at=4)
-    scale_std = baseline.size_scale_std
+            return floor.run(n, fault=component, loss=RATE * np.clip(np.arange(n) - 4, 0, None), fault_at=4)
+    scale_std = float(baseline.component_scale_std()[list(baseline.names).index(component)])
     covered, undetermined, widths, errors = [], 0, [], []
-    covered_scatter_only = []
+    covered_scatter_only, widths_scatter = [], []
     for seq in range(n_seq):
         data = sequence(seq)
         state = None
@@ -79,11 +86,11 @@ def _main() -> None:
                 warnings.simplefilter("ignore")
                 analysis = monitor.analyse(m.frf, baseline=baseline, modal=False)
             state, deviation, alarms = monitor.step(state, analysis, m.conditions, baseline)
-            if first is None and any(a.component == "screw3" for a in alarms):
+            if first is None and any(a.component == component for a in alarms):
                 first = k
             if first is not None:
                 times.append(0.25 * k)
-                changes.append(float(np.expm1(deviation[monitor.estimator.names.index("screw3")])))
+                changes.append(float(np.expm1(deviation[monitor.estimator.names.index(component)])))
             if first is not None and k == first + AT - 1:
                 break
         if first is None or len(times) < 3:
@@ -91,7 +98,10 @@ def _main() -> None:
         forecast = forecast_crossing(times, changes, -0.25, scale_std=scale_std)
         truth = 0.25 * (4 + 0.25 / RATE)  # factor 1 - RATE (k - 4) reaches 0.75
         covered.append(forecast.covers(truth))
-        covered_scatter_only.append(forecast_crossing(times, changes, -0.25).covers(truth))
+        scatter_only = forecast_crossing(times, changes, -0.25)
+        covered_scatter_only.append(scatter_only.covers(truth))
+        if scatter_only.determined:
+            widths_scatter.append(scatter_only.upper - scatter_only.lower)
         undetermined += not forecast.determined
         if forecast.determined and forecast.time is not None:
             widths.append(forecast.upper - forecast.lower)
@@ -101,15 +111,19 @@ def _main() -> None:
                   f"coverage so far {sum(covered)}/{len(covered)} (scatter only {sum(covered_scatter_only)})",
                   flush=True)
     rate = float(np.mean(covered))
-    row = {"case": case, "sequences": len(covered), "coverage_95": rate, "scale_std": scale_std,
+    row = {"case": case, "component": component, "sequences": len(covered), "coverage_95": rate, "scale_std": scale_std,
            "coverage_95_scatter_only": float(np.mean(covered_scatter_only)),
            "coverage_binomial_se": float(np.sqrt(0.95 * 0.05 / len(covered))),
            "undetermined": undetermined, "median_width_h": float(np.median(widths)),
-           "median_error_h": float(np.median(errors)), "rate_per_measurement": RATE, "forecast_after": AT}
+           "median_error_h": float(np.median(errors)), "rate_per_measurement": RATE, "forecast_after": AT,
+           "median_width_scatter_only_h": float(np.median(widths_scatter)),
+           "wall_s": time.perf_counter() - t0, "cpu_s": time.process_time() - c0}
     print(f"coverage {100 * rate:.1f} % of {len(covered)} (95 % stated; scatter only "
           f"{100 * row['coverage_95_scatter_only']:.1f} %), {undetermined} undetermined, median width "
-          f"{row['median_width_h']:.2f} h, median error {row['median_error_h']:+.2f} h")
-    print(f"wrote {write_results('prognosis' if case == 'scenario' else f'prognosis_{case}', [row])}")
+          f"{row['median_width_h']:.2f} h (scatter only {row['median_width_scatter_only_h']:.2f} h), median error "
+          f"{row['median_error_h']:+.2f} h, scale_std {100 * scale_std:.2g} %, cpu {row['cpu_s']:.0f} s")
+    name = "prognosis" if case == "scenario" else f"prognosis_{case}"
+    print(f"wrote {write_results(name if component == 'screw3' else f'{name}_{component}', [row])}")
 
 
 if __name__ == "__main__":

@@ -477,8 +477,10 @@ def test_status_states_the_detectable_change(monitored: Path, capsys) -> None:
     assert re.search(r"detectable: a change of front [0-9.e-]+ %, rear .* is found after about [0-9.]+ "
                      r"measurement\(s\) \(2 standard deviations of the healthy scatter, resolution [0-9.e-]+ %\)", line)
     # and how uncertain a diagnosed size is beyond the scatter (issue 25: no fixed 0.5 % floor)
-    assert re.search(r"sizes: a diagnosed change's size is uncertain by \+- [0-9.]+ % of itself beyond the scatter \(the "
-                     r"healthy machine is [0-9.e-]+ % from its model", out)
+    # per component, read back on the machine's twin (the store keeps the healthy FRFs)
+    assert re.search(r"sizes: a diagnosed change's size is uncertain beyond the scatter by \+- front [0-9.]+ %, rear "
+                     r"[0-9.]+ %, .*screw4 [0-9.]+ % of itself \(read back on the machine's twin: .* the healthy machine "
+                     r"is [0-9.e-]+ % from its model\)", out)
     code, out, _ = run(capsys, "monitor", "status", monitored / "store.db", "--json")
     det = json.loads(out)["machines"][0]["detectable"]
     with HistoryStore(monitored / "store.db") as history:
@@ -489,3 +491,4 @@ def test_status_states_the_detectable_change(monitored: Path, capsys) -> None:
     assert det["change"]["front"] == pytest.approx(-np.expm1(-2 * baseline.scale[0]))
     assert det["resolution"] == baseline.resolution < 0.005  # derived, below the old fixed 0.5 %
     assert det["size_scale_std"] == pytest.approx(baseline.size_scale_std)
+    assert det["size_scale"]["screw1"] == pytest.approx(baseline.component_scale_std()[2])

@@ -125,3 +125,61 @@ def test_the_forecasts_scale_term_adds_in_quadrature() -> None:
     assert wide.time == pytest.approx(plain.time)
     assert wide.time - wide.lower == pytest.approx(np.hypot(plain.time - plain.lower, shift), rel=1e-9)
     assert wide.upper - wide.time == pytest.approx(np.hypot(plain.upper - plain.time, shift), rel=1e-9)
+
+
+def _twin_case(spindle: NumericModel, **mismatch: float):
+    """A chain and a baseline (with FRFs: the twin) from 24 healthy measurements of a mismatched generator."""
+    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
+                            band=(150.0, 1000.0))
+    monitor = Monitor(config, spindle)
+    floor = ShopFloor(config, spindle, rng=np.random.default_rng(11), sensor_lag=0.5, **mismatch)
+    day = floor.run(24)
+    baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
+                                      conditions=[m.conditions for m in day], frfs=[m.frf for m in day])
+    return monitor, floor, baseline
+
+
+def _sized(monitor: Monitor, floor: ShopFloor, baseline, fault: str, loss: float):
+    """The diagnosis of one measurement of ``fault`` at ``loss``, sized along the true fault."""
+    m = floor.run(1, fault=fault, loss=loss)[0]
+    deviation = baseline.deviation(monitor.analyse(m.frf, baseline=baseline, modal=False).estimate.log_factor,
+                                   m.conditions)
+    hyp = next(h for h in monitor.hypotheses() if h.name == fault)
+    return diagnose(deviation, baseline.size_covariance(deviation), [hyp])
+
+
+def test_size_intervals_follow_what_is_off_not_the_offset(spindle: NumericModel) -> None:
+    # damping 30 % off barely moves the factors (offset about 0.5 %), yet a screw-1 loss is read about 8 % too small
+    # on the independent generator: the offset rule gave +-0.9 % of the change and its 95 % interval missed the
+    # truth; the twin (the model with one damping factor fitted to the healthy FRFs) measures the error per component
+    monitor, floor, baseline = _twin_case(spindle, damping_factor=1.3)
+    assert baseline.model_offset < 0.01
+    d = _sized(monitor, floor, baseline, "screw1", 0.25)
+    assert abs(d.change + 0.25) > 0.005  # the error is real (about 3 % of the loss)
+    assert abs(d.change + 0.25) <= 1.96 * d.change_std, (d.change, d.change_std)
+    # the prognosis' scale of each component: the twin's error; screw 1's far above the front bearing's
+    scale = dict(zip(baseline.names, baseline.component_scale_std(), strict=True))
+    assert scale["screw1"] > 0.05
+    assert scale["front"] < 0.02
+
+
+def test_a_mass_error_does_not_widen_the_size_intervals(spindle: NumericModel) -> None:
+    # masses 3 % off shift every factor by -3 % (a uniform mass error is a uniform stiffness-and-damping one) and
+    # change the read sizes by less than 1 %: the offset rule widened every interval by 4.4 % of the change
+    monitor, floor, baseline = _twin_case(spindle, mass_error=0.03)
+    assert baseline.model_offset > 0.02
+    for fault in ("front", "screw3"):
+        d = _sized(monitor, floor, baseline, fault, 0.25)
+        assert abs(d.change + 0.25) <= 1.96 * d.change_std, (fault, d.change, d.change_std)
+        assert d.change_std < 0.02 * 0.25, (fault, d.change_std)  # offset rule: 0.044 * 0.29 = 0.013
+    assert baseline.size_scale_std < 0.02
+
+
+def test_the_twins_errors_round_trip(spindle: NumericModel) -> None:
+    from cappe.monitor import Baseline
+
+    _, _, baseline = _twin_case(spindle, damping_factor=1.3)
+    again = Baseline.from_dict(baseline.to_dict())
+    assert baseline.size_error is not None
+    np.testing.assert_array_equal(again.size_error, baseline.size_error)
+    np.testing.assert_array_equal(again.component_scale_std(), baseline.component_scale_std())

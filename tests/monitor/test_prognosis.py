@@ -117,6 +117,18 @@ def test_status_forecasts_a_loosening_screw(spindle, tmp_path, capsys) -> None:
                    monitor=monitor, keep_frf=False)
         forecast = forecast_fault(store, "s1", "screw3")
         assert forecast_fault(store, "s1", "front") is None  # no open alarm
+        # a twin that reads screw 3's sizes 25 % off: no crossing time can be told (not a DataError from the
+        # forecast's scale_std limit that would stop `monitor status`)
+        doc = store.baseline("s1")
+        assert doc is not None
+        n = len(doc["names"])
+        store.set_baseline("s1", {**doc, "size_error": (0.25 * np.eye(n)).tolist()})
+        vague = forecast_fault(store, "s1", "screw3")
+        assert vague is not None
+        assert not vague.determined
+        assert vague.text() == "reaches -25 %: cannot be told (the model's twin reads screw3's changes 25 % of " \
+                               "themselves off)"
+        store.set_baseline("s1", doc)
     assert forecast is not None
     assert forecast.determined
     assert forecast.threshold == -0.25

@@ -619,7 +619,12 @@ def status(args: argparse.Namespace) -> int:
             lines.append(f"  detectable: a change of {sizes} is found after about {det['measurements']:.2g} "
                          f"measurement(s) ({det['shift']:g} standard deviations of the healthy scatter, resolution "
                          f"{100 * det['resolution']:.2g} %); smaller changes take longer")
-            if det.get("size_scale_std") is not None:
+            if det.get("size_scale"):
+                per = ", ".join(f"{name} {100 * v:.2g} %" for name, v in det["size_scale"].items())
+                lines.append(f"  sizes: a diagnosed change's size is uncertain beyond the scatter by +- {per} of "
+                             "itself (read back on the machine's twin: the model with its damping fitted to the "
+                             f"healthy FRFs; the healthy machine is {100 * det['model_offset']:.2g} % from its model)")
+            elif det.get("size_scale_std") is not None:
                 lines.append(f"  sizes: a diagnosed change's size is uncertain by +- "
                              f"{100 * det['size_scale_std']:.2g} % of itself beyond the scatter (the healthy machine "
                              f"is {100 * det['model_offset']:.2g} % from its model, RMS over the components: its "

@@ -21,14 +21,27 @@ not give, or one outside the learned range by more than :data:`LEARNED_MARGIN` o
 extrapolation), leaves the measurement recorded but not judged; one more than :data:`IMPLAUSIBLE` half-ranges
 away is called implausible (a unit or sensor error). :meth:`Baseline.gradient` gives the change of the expected
 log-factors per unit of each condition: the signature of a condition sensor that reads off by a constant.
+
+A change is read through the model's sensitivities, so a model that does not describe the machine reads it too large
+or too small by a fraction of itself that the healthy scatter cannot show. How large that fraction is depends on
+*what* is off and on the component, not on the size of the offset: on the spindle, masses 3 % off shift every
+log-factor by about -0.03 and change the read sizes by less than 1 %, because a uniform mass error is a uniform
+stiffness-and-damping error the factors absorb; damping 30 % off barely shows in the factors but reads a screw's
+loss up to 8 % too small and a front-bearing loss within 0.2 %. :func:`twin_size_errors` therefore measures the
+error on a *twin* of the machine: the model with its component factors and one common damping factor fitted to
+healthy FRFs (the mismatch the data show), from which losses of each component are read back through the monitor's
+own estimator. Its per-component errors give :attr:`Baseline.component_scale_std` (the prognosis of a component)
+and the size term of :meth:`Baseline.size_covariance`; a baseline without FRFs falls back on the offset rule
+(:data:`MODEL_OFFSET_FACTOR`).
 """
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -36,8 +49,11 @@ from numpy.typing import ArrayLike, NDArray
 from cappe.exceptions import DataError
 from cappe.systems.frf import FRFData
 
-__all__ = ["BASELINE_FORMAT", "BLOCK", "IMPLAUSIBLE", "LEARNED_MARGIN", "SIZE_SCALE_FLOOR", "Baseline",
-           "derived_resolution", "learn_baseline"]
+if TYPE_CHECKING:
+    from cappe.monitor._estimation import FactorEstimator
+
+__all__ = ["BASELINE_FORMAT", "BLOCK", "IMPLAUSIBLE", "LEARNED_MARGIN", "SIZE_SCALE_FLOOR", "TWIN_LOSSES",
+           "Baseline", "derived_resolution", "learn_baseline", "twin_size_errors"]
 
 BASELINE_FORMAT = "cappe.monitor-baseline/1"
 
@@ -60,6 +76,14 @@ SIZE_SCALE_FLOOR = 0.005
 #: (about 2.5 times the offset for the worst component); 1.5 brought the 95 % intervals to 66 of 67 in the
 #: calibration run (1.0: 60 of 67), checked on fresh seeds in ``benchmarks/results/calibration_mismatch.json``.
 MODEL_OFFSET_FACTOR = 1.5
+
+#: Losses of each component read back on the twin (:func:`twin_size_errors`; the largest error is kept): the range a
+#: trend crosses on its way to the intolerable grade. The error changes with the size, and not monotonically (screw 3
+#: of the spindle with damping 30 % off: 0.4 % at a 3 % loss, 3 % at 5 %, 1.3 % at 10 %, 4.5 % at 30 %).
+TWIN_LOSSES = (0.02, 0.05, 0.1, 0.2, 0.3)
+
+#: Healthy FRFs (evenly spread over the learned day) the twin's damping and factors are fitted to.
+TWIN_FITS = 8
 
 #: Consecutive healthy measurements whose mean residual shows variation slower than one measurement.
 BLOCK = 8
@@ -102,6 +126,9 @@ class Baseline:
         later fits are judged against it.
     left_out : tuple of str
         Measurements of the chosen range that were left out, and why.
+    size_error : ndarray, shape (n, n), optional
+        Largest relative error of component ``i``'s read change, as a fraction of a loss of component ``j``
+        (column), on the machine's twin (:func:`twin_size_errors`); None: not measured (no FRFs).
     """
 
     names: tuple[str, ...]
@@ -119,6 +146,7 @@ class Baseline:
     created: str = ""
     sigma: float | None = None
     left_out: tuple[str, ...] = ()
+    size_error: Array | None = None
 
     def _design(self, conditions: Mapping[str, float] | None) -> Array:
         values = []
@@ -266,21 +294,46 @@ class Baseline:
 
     @property
     def size_scale_std(self) -> float:
-        """Relative standard uncertainty of a change's size: ``hypot(SIZE_SCALE_FLOOR, MODEL_OFFSET_FACTOR
-        model_offset)``.
+        """Relative standard uncertainty of a change's size, the largest over the components.
 
-        A change is read through the model's sensitivities; a model that is a fraction ``e`` away from the machine
-        has them wrong by about ``e``, so the sizes it reads are off by about ``e`` of themselves, an error the
-        healthy scatter cannot show. Checked by simulation on an independent generator (exact model and a machine
-        3 % heavier than its model, ``benchmarks/bench_calibration.py``)."""
+        With the twin's errors (:attr:`size_error`) the largest of :meth:`component_scale_std` over the
+        components; without, ``hypot(SIZE_SCALE_FLOOR, MODEL_OFFSET_FACTOR model_offset)``: a model a fraction ``e``
+        away from the machine is taken to read sizes about ``e`` of themselves off. Checked by simulation on an
+        independent generator (exact model and a machine 3 % heavier and 30 % more damped than its model,
+        ``benchmarks/bench_calibration.py``)."""
+        if self.size_error is not None:
+            return float(np.max(self.component_scale_std(leaked=True), initial=SIZE_SCALE_FLOOR))
         return float(np.hypot(SIZE_SCALE_FLOOR, MODEL_OFFSET_FACTOR * self.model_offset))
+
+    def component_scale_std(self, leaked: bool = False) -> Array:
+        """Relative standard uncertainty of each component's read change beyond the scatter.
+
+        ``hypot(SIZE_SCALE_FLOOR, error)`` with ``error`` the twin's (:attr:`size_error`): the component's own
+        error for a loss of itself, or with ``leaked`` the largest for a loss of any component (what a change
+        elsewhere leaks into it). Without the twin every component gets the offset rule of :attr:`size_scale_std`.
+
+        Parameters
+        ----------
+        leaked : bool
+            Include what losses of the other components leak into each component's reading.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+        """
+        if self.size_error is None:
+            return np.full(len(self.names), self.size_scale_std)
+        error = np.max(self.size_error, axis=1) if leaked else np.diag(self.size_error)
+        return np.asarray(np.hypot(SIZE_SCALE_FLOOR, error), dtype=float)
 
     def size_covariance(self, change: ArrayLike, weight: float = 1.0) -> Array:
         """Covariance the diagnosis sizes a change with and compares the hypotheses by.
 
         The charts' covariance (the healthy scatter and the resolution, both from the baseline's own data) divided by
-        ``weight``, plus the systematic part that grows with the change: ``(size_scale_std max|change|)^2`` on
-        every component (a wrong sensitivity also leaks part of a change into the other components).
+        ``weight``, plus the systematic part that grows with the change, on component ``i``: with the twin's errors
+        ``E`` (:attr:`size_error`) ``(SIZE_SCALE_FLOOR max|change|)^2 + sum_j (E_ij change_j)^2``, the error its
+        reading takes from the change of each component (its own, and what a wrong sensitivity leaks into it from
+        the others); without them ``(size_scale_std max|change|)^2`` on every component.
 
         Parameters
         ----------
@@ -293,8 +346,13 @@ class Baseline:
         -------
         ndarray, shape (n, n)
         """
-        scale = self.size_scale_std * float(np.max(np.abs(np.asarray(change, dtype=float)), initial=0.0))
-        return np.asarray(self.chart_covariance / weight + scale**2 * np.eye(len(self.names)), dtype=float)
+        delta = np.asarray(change, dtype=float)
+        largest = float(np.max(np.abs(delta), initial=0.0))
+        if self.size_error is None:
+            variance = np.full(len(self.names), (self.size_scale_std * largest) ** 2)
+        else:
+            variance = (SIZE_SCALE_FLOOR * largest) ** 2 + (self.size_error**2) @ (delta**2)
+        return np.asarray(self.chart_covariance / weight + np.diag(variance), dtype=float)
 
     @property
     def diagnosis_covariance(self) -> Array:
@@ -323,6 +381,7 @@ class Baseline:
             "resolution": self.resolution,
             "sigma": self.sigma,
             "left_out": list(self.left_out),
+            "size_error": None if self.size_error is None else self.size_error.tolist(),
             # the view for people and the dashboard: factors at the centre of the conditions
             "mean": {n: float(v) for n, v in zip(self.names, mean, strict=True)},
             "std": {n: float(m * s) for n, m, s in zip(self.names, mean, self.std, strict=True)},
@@ -371,6 +430,8 @@ class Baseline:
                 created=str(data.get("created", "")),
                 sigma=None if data.get("sigma") is None else float(data["sigma"]),
                 left_out=tuple(str(v) for v in data.get("left_out", [])),
+                size_error=None if data.get("size_error") is None
+                else np.asarray(data["size_error"], dtype=float).reshape(len(data["names"]), len(data["names"])),
             )
         except (KeyError, TypeError, ValueError) as exc:
             msg = f"baseline is malformed: {type(exc).__name__} {exc}"
@@ -446,6 +507,7 @@ def learn_baseline(
     measurement_ids: Sequence[int] = (),
     preload_map: Mapping[str, Any] | None = None,
     sigma: float | None = None,
+    size_error: ArrayLike | None = None,
 ) -> Baseline:
     """Learn a :class:`Baseline` from healthy measurements.
 
@@ -469,6 +531,8 @@ def learn_baseline(
     preload_map : mapping, optional
     sigma : float, optional
         Median residual of the healthy fits (see :attr:`Baseline.sigma`).
+    size_error : array_like, shape (n, n), optional
+        The twin's relative size errors (:func:`twin_size_errors`; see :attr:`Baseline.size_error`).
 
     Raises
     ------
@@ -542,4 +606,73 @@ def learn_baseline(
         map=dict(preload_map) if preload_map else None,
         created=datetime.now(UTC).isoformat(),
         sigma=sigma,
+        size_error=None if size_error is None else np.asarray(size_error, dtype=float),
     )
+
+
+def twin_size_errors(
+    read: FactorEstimator,
+    twin: FactorEstimator,
+    frfs: Sequence[FRFData],
+    *,
+    losses: Sequence[float] = TWIN_LOSSES,
+    fits: int = TWIN_FITS,
+) -> Array:
+    """How wrong the monitor reads each component's loss on a twin of the machine (see the module notes).
+
+    ``twin`` has the groups of ``read`` and more (one factor of all the model's dampings, say): it is fitted to up to
+    ``fits`` of the healthy FRFs, evenly spread over them, and the median of its factors is the twin. Losses of each
+    component of the twin (``losses``, fractions) are then read back through ``read`` against its reading of the
+    healthy twin; the errors are noise-free, so they are the model's mismatch alone.
+
+    Parameters
+    ----------
+    read : FactorEstimator
+        The monitor's estimator (one group per component).
+    twin : FactorEstimator
+        An estimator whose first groups are those of ``read``, followed by the groups that describe the mismatch.
+    frfs : sequence of FRFData
+        Healthy FRFs holding the configured channels.
+    losses : sequence of float
+        Relative losses read back (0.1 = 10 % lost).
+    fits : int
+        Largest number of FRFs the twin is fitted to.
+
+    Returns
+    -------
+    ndarray, shape (n, n)
+        ``[i, j]``: the largest over ``losses`` of ``|read change of i - true change of i| / loss`` for a loss of
+        component ``j``.
+
+    Raises
+    ------
+    DataError
+        No FRFs, or ``twin``'s first groups are not ``read``'s.
+    """
+    n = len(read.names)
+    if twin.names[:n] != read.names or not frfs:
+        msg = (f"a twin needs healthy FRFs and the groups {list(read.names)} first; got {len(frfs)} FRFs and "
+               f"groups {list(twin.names)}")
+        raise DataError(msg)
+    chosen = [frfs[int(k)] for k in np.unique(np.linspace(0, len(frfs) - 1, min(fits, len(frfs))).round())]
+    with warnings.catch_warnings():
+        # a probe of the model, not a result: a misfit is what the twin is for, and the errors below are its answer
+        warnings.simplefilter("ignore")
+        factors = np.median([twin.estimate(f, misfit_ratio=None).log_factor for f in chosen], axis=0)
+        freq, _ = read.select(chosen[0])
+
+        def reading(log_factor: Array) -> Array:
+            h = twin.frf(log_factor, freq)
+            data = FRFData(freq, h, read.inputs, read.outputs)
+            return read.estimate(data, factors[:n], misfit_ratio=None).log_factor
+
+        healthy = reading(factors)
+        errors = np.zeros((n, n))
+        for j in range(n):
+            for loss in losses:
+                shifted = factors.copy()
+                shifted[j] += np.log1p(-loss)
+                change = np.expm1(reading(shifted) - healthy)
+                truth = np.where(np.arange(n) == j, -loss, 0.0)
+                errors[:, j] = np.maximum(errors[:, j], np.abs(change - truth) / loss)
+    return errors

@@ -44,7 +44,7 @@ from scipy.optimize import linear_sum_assignment
 
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, load_model
-from cappe.monitor._baseline import LEARNED_MARGIN, SIZE_SCALE_FLOOR, Baseline, learn_baseline
+from cappe.monitor._baseline import LEARNED_MARGIN, SIZE_SCALE_FLOOR, Baseline, learn_baseline, twin_size_errors
 from cappe.monitor._config import MonitorConfig, severity_rank, worst_severity
 from cappe.monitor._detection import ChartSignal, SequentialDetector
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
@@ -497,18 +497,44 @@ class Monitor:
         sigma: float | None,
     ) -> Baseline:
         """:func:`learn_baseline` with what the machine adds: its component names, the mean FRF on its band and
-        channels, and the preload map."""
+        channels, the preload map and the size errors of its twin (:meth:`size_errors`)."""
+        banded = [self._band(f) for f in frfs] if frfs else None
         return learn_baseline(
             log_factors,
             names=self.estimator.names,
             conditions=conditions,
-            frfs=[self._band(f) for f in frfs] if frfs else None,
+            frfs=banded,
             features=features,
             resolution=resolution,
             measurement_ids=measurement_ids,
             preload_map=self._preload_map(),
             sigma=sigma,
+            size_error=self.size_errors(banded) if banded and not self.operational else None,
         )
+
+    def size_errors(self, frfs: Sequence[FRFData]) -> Array | None:
+        """Relative errors of the read component changes on the machine's twin: the model with the component
+        factors and one factor of all its other dampings fitted to these healthy FRFs
+        (:func:`~cappe.monitor._baseline.twin_size_errors`).
+
+        Parameters
+        ----------
+        frfs : sequence of FRFData
+            Healthy FRFs holding the configured channels.
+
+        Returns
+        -------
+        ndarray, shape (n, n) or None
+            ``[i, j]``: error of component ``i``'s read change as a fraction of a loss of component ``j``; None
+            where the model has no damping parameter outside the components (nothing for the twin to fit).
+        """
+        grouped = {p for c in self.config.components for p in c.parameters}
+        damping = [p.name for p in self.model.structure.parameters
+                   if p.kind in ("damping", "loss") and p.name not in grouped]
+        if not damping:
+            return None
+        groups = {c.name: list(c.parameters) for c in self.config.components}
+        return twin_size_errors(self.estimator, self._estimator({**groups, "damping (twin)": damping}), frfs)
 
     def _band(self, frf: FRFData) -> FRFData:
         freq, h = self.estimator.select(frf)
@@ -843,7 +869,9 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
         ``change``: component -> the relative change of ``shift`` chart standard deviations; ``measurements``:
         the average number of measurements to find it; ``resolution``: the baseline's resolution; ``shift``;
         ``size_scale_std``: the relative standard uncertainty of a diagnosed change's size beyond the scatter
-        (:attr:`Baseline.size_scale_std`); ``model_offset``: how far the healthy machine is from its model.
+        (:attr:`Baseline.size_scale_std`, the largest over the components); ``model_offset``: how far the healthy
+        machine is from its model; ``size_scale``: component -> its own size uncertainty measured on the machine's
+        twin (:meth:`Baseline.component_scale_std`; None without the twin).
     """
     detector = SequentialDetector(baseline.names, baseline.scale, method=config.detection,
                                   false_alarm_rate=config.false_alarm_rate, shift=config.shift,
@@ -852,7 +880,9 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
     return {"change": {n: float(-np.expm1(-config.shift * s)) for n, s in zip(baseline.names, baseline.scale,
                                                                             strict=True)},
             "measurements": float(design["arl_at_shift"]), "resolution": baseline.resolution,
-            "shift": config.shift, "size_scale_std": baseline.size_scale_std, "model_offset": baseline.model_offset}
+            "shift": config.shift, "size_scale_std": baseline.size_scale_std, "model_offset": baseline.model_offset,
+            "size_scale": None if baseline.size_error is None else
+            {n: float(v) for n, v in zip(baseline.names, baseline.component_scale_std(), strict=True)}}
 
 
 def file_digest(path: str | Path) -> str:
@@ -1034,8 +1064,8 @@ def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95)
 
     The relative changes from healthy recorded for the component (the ``deviation`` estimates) from the
     measurement of its first unacknowledged alarm on are extrapolated linearly (:func:`forecast_crossing`, a
-    Fieller interval widened for the systematic scale error of the sizes, the baseline's
-    :attr:`~cappe.monitor._baseline.Baseline.size_scale_std`); times are hours from the
+    Fieller interval widened for the systematic scale error of the component's sizes, the baseline's
+    :meth:`~cappe.monitor._baseline.Baseline.component_scale_std`); times are hours from the
     latest of them.
 
     Parameters
@@ -1074,5 +1104,13 @@ def forecast_fault(store: Any, machine: str, fault: str, *, level: float = 0.95)
     change = table["value"].to_numpy(dtype=float)
     limit = config.thresholds(fault).intolerable
     doc = store.baseline(machine)
-    scale_std = Baseline.from_dict(doc).size_scale_std if doc else SIZE_SCALE_FLOOR
-    return forecast_crossing(hours, change, -limit if change[-1] < 0 else limit, level=level, scale_std=scale_std)
+    scale_std = SIZE_SCALE_FLOOR
+    if doc:
+        baseline = Baseline.from_dict(doc)
+        scale_std = float(baseline.component_scale_std()[list(baseline.names).index(fault)])
+    threshold = -limit if change[-1] < 0 else limit
+    if scale_std >= 0.2:  # the twin reads this component's sizes 20 % or more off: no crossing time can be told
+        nominal = forecast_crossing(hours, change, threshold, level=level)
+        return replace(nominal, lower=-np.inf, upper=np.inf, determined=False,
+                       reason=f"the model's twin reads {fault}'s changes {100 * scale_std:.2g} % of themselves off")
+    return forecast_crossing(hours, change, threshold, level=level, scale_std=scale_std)

@@ -15,9 +15,10 @@ distribution is skewed. Where the slope is not significant at that level the set
 tell when, and the forecast says so instead of giving a number.
 
 The monitor's change sizes also carry a systematic error proportional to the change (the fit's nonlinearity and
-the model's error: up to about 1 % of the change on the exact spindle model, 1 to 8 % with its masses 3 % off),
-which the scatter about the line cannot show and which shifts the whole line; the monitor passes the baseline's
-estimate of it (:attr:`cappe.monitor.Baseline.size_scale_std`, from the model's offset from the healthy machine).
+the model's error: up to about 1 % of the change on the exact spindle model, 1 to 10 % with its damping 30 % off,
+depending on the component), which the scatter about the line cannot show and which shifts the whole line; the
+monitor passes the baseline's estimate of it for the component (:meth:`cappe.monitor.Baseline.component_scale_std`,
+read back on the machine's twin).
 A true change ``(1 + e)`` times the estimated one crosses ``c`` when the estimate crosses ``c / (1 + e)``, a time
 shift of about ``-e c / b``; with ``scale_std`` the standard deviation of ``e``, each side of Fieller's interval is
 widened in quadrature by ``z scale_std |c / b|`` (``z`` the normal quantile of the level): the scatter and the scale
@@ -58,6 +59,8 @@ class CrossingForecast:
         Points fitted.
     determined : bool
         Whether the interval is bounded (the trend is significant at ``level``).
+    reason : str
+        Why the time cannot be told, where that is not the trend's significance (empty otherwise).
     """
 
     threshold: float
@@ -69,6 +72,7 @@ class CrossingForecast:
     slope_std: float
     n: int
     determined: bool
+    reason: str = ""
 
     def covers(self, value: float) -> bool:
         """Whether ``value`` lies in the interval.
@@ -90,7 +94,7 @@ class CrossingForecast:
 
         return {"threshold": self.threshold, "time": finite(self.time), "lower": finite(self.lower),
                 "upper": finite(self.upper), "level": self.level, "slope": self.slope, "slope_std": self.slope_std,
-                "n": self.n, "determined": self.determined}
+                "n": self.n, "determined": self.determined, "reason": self.reason}
 
     def text(self, unit: str = "h", now: float = 0.0) -> str:
         """The forecast in words, times counted from ``now``.
@@ -107,6 +111,8 @@ class CrossingForecast:
         str
         """
         grade = f"{100 * self.threshold:+.0f} %"
+        if self.reason:
+            return f"reaches {grade}: cannot be told ({self.reason})"
         if not self.determined or self.time is None:
             return (f"reaches {grade}: cannot be told from {self.n} measurements (the trend "
                     f"{100 * self.slope:+.2g} %/{unit} +- {100 * self.slope_std:.2g} is not significant at "
