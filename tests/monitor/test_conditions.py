@@ -183,3 +183,17 @@ def test_grades_do_not_flip_on_noise_for_a_constant_fault(monitor: Monitor, base
         assert any(a.message.startswith("worse") for a in run())
     finally:
         chain.ESCALATION_Z = saved
+
+
+def test_a_value_just_outside_the_learned_range_prints_apart_from_its_end(baseline) -> None:
+    # 4 significant digits would print the value as the range's end ("18.09 is outside ... 18.09 to 26.14")
+    lo, hi = baseline.center[0] - baseline.spread[0], baseline.center[0] + baseline.spread[0]
+    value = lo - 1e-4 * baseline.spread[0]
+    assert f"{value:.4g}" == f"{lo:.4g}"  # the case this test is about
+    reasons, notes = baseline.judge({"temperature": value})
+    assert reasons == []
+    number, rest = notes[0].removeprefix("temperature ").split(" is slightly outside the learned range ")
+    ends = rest.split(" (")[0].split(" to ")
+    assert float(number) < float(ends[0]) <= float(ends[1])
+    assert abs(float(ends[0]) - lo) < abs(value - lo)
+    assert abs(float(ends[1]) - hi) < 1e-3 * (hi - lo)

@@ -197,20 +197,23 @@ class Baseline:
                                f"give (it gives {others})")
                 continue
             value = float(given[name])
-            lo, hi = self.center[k] - self.spread[k], self.center[k] + self.spread[k]
-            learned = f"the learned range {lo:.4g} to {hi:.4g}"
             if not np.isfinite(value):
                 reasons.append(f"{name} is not a number ({value})")
                 continue
+            lo, hi = self.center[k] - self.spread[k], self.center[k] + self.spread[k]
+            # as many digits as tell the value from the range's ends ("18.087 ... outside the learned range 18.09 to
+            # 26.14", not "18.09 ... outside the learned range 18.09 to 26.14")
+            digits = next((d for d in range(4, 10) if f"{value:.{d}g}" not in (f"{lo:.{d}g}", f"{hi:.{d}g}")), 4)
+            learned = f"the learned range {lo:.{digits}g} to {hi:.{digits}g}"
             x = abs(value - self.center[k]) / self.spread[k]
             if x > IMPLAUSIBLE:
-                reasons.append(f"{name} {value:.4g} is implausible for this machine: {x - 1:.2g} half-ranges from "
-                               f"{learned} (a unit or sensor error?)")
+                reasons.append(f"{name} {value:.{digits}g} is implausible for this machine: {x - 1:.2g} half-ranges "
+                               f"from {learned} (a unit or sensor error?)")
             elif x > 1 + LEARNED_MARGIN:
-                reasons.append(f"{name} {value:.4g} is outside {learned} ({x - 1:.2g} half-ranges beyond it): the "
-                               f"healthy expectation there is unknown")
+                reasons.append(f"{name} {value:.{digits}g} is outside {learned} ({x - 1:.2g} half-ranges beyond it): "
+                               f"the healthy expectation there is unknown")
             elif x > 1 + 1e-12:  # the learned extremes themselves (rounding) are inside
-                notes.append(f"{name} {value:.4g} is slightly outside {learned} (judged on the extrapolated "
+                notes.append(f"{name} {value:.{digits}g} is slightly outside {learned} (judged on the extrapolated "
                              f"expectation)")
         return reasons, notes
 
