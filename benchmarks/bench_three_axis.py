@@ -122,8 +122,12 @@ def child(seed: int) -> dict[str, Any]:
         "eigen_solves": [{"kind": k, "n": n, "dtype": d, "count": c} for (k, n, d), c in sorted(counter.items())],
         # the joint refinement's record: its exact solves (quadratic eigenproblem or fallback to the state eig), its
         # pairing candidates, its least-squares evaluations over the fit and the two reweighted refits
-        "joint_refinement": {k: result.diagnostics.get(k) for k in ("exact_solves", "pairing_candidates",
-                                                                     "iterations", "evaluations", "scatter")},
+        "joint_refinement": {**{k: result.diagnostics.get(k) for k in ("exact_solves", "pairing_candidates",
+                                                                        "iterations", "evaluations", "scatter")},
+                             "record": result.diagnostics.get("joint_refinement")},
+        # how far the joint refinement started from the truth (after the damping least squares)
+        "start_errors": {k: float(v / truth[k] - 1.0)
+                         for k, v in result.diagnostics["stages"]["after_damping_least_squares"].items()},
     }
 
 
@@ -181,7 +185,7 @@ def _damping_names() -> set[str]:
 
 if __name__ == "__main__":
     if "--child" in sys.argv:
-        found = json.dumps(child(int(sys.argv[sys.argv.index("--child") + 1])))
+        found = json.dumps(child(int(sys.argv[sys.argv.index("--child") + 1])), default=str)
         print(found)
         print(found, file=sys.stderr)  # kept in the log too
     else:
