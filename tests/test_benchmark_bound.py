@@ -15,8 +15,9 @@ from cappe.model import NumericModel
 def test_the_bound_counts_scipy_eigh_and_the_quadratic_eigenproblem_factorizations(slide, monkeypatch):
     # before issue 24's fix the count wrapped numpy's eigh and eig only: the modal derivatives' scipy eigh (39390 of
     # them in a three-axis identification) and the quadratic-eigenproblem LU factorizations went uncounted
-    import cappe.modal._engine as engine_module
     from benchmarks.bench_pipeline import _count_eigen_solves
+
+    import cappe.modal._engine as engine_module
 
     for module, name in ((np.linalg, "eigh"), (np.linalg, "eig"), (scipy.linalg, "eigh"),
                          (scipy.linalg.lapack, "zgetrf")):

@@ -448,35 +448,42 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
     d_visc_x = products["C"] + products["G"]
     d_mass_x = products["M"]
     flat = np.stack([mass, visc, stiff]).astype(complex).reshape(3, n * n)  # Q(s) = (s^2, s, 1) @ flat
+    # u^T M and u^T (C + G) in one product with complex operands (a real matrix times a complex vector is copied)
+    mass_visc = np.concatenate([mass, visc], axis=1).astype(complex)
+    biggest = (float(np.abs(mass).max()), float(np.abs(visc).max()), float(np.abs(stiff).max()))
+    # -dQ x per mode, laid out (m, n, n_p) for the right-hand sides
+    d_x = [np.ascontiguousarray(a.transpose(2, 1, 0)) for a in (d_mass_x, d_visc_x, d_stiff_x)]
     getrf, getrs = scipy.linalg.lapack.zgetrf, scipy.linalg.lapack.zgetrs
     d_poles = np.zeros((n_p, m), dtype=complex)
-    d_shapes = np.zeros((n_p, sensors.shape[0], m), dtype=complex)
+    dx_all = np.zeros((n, n_p, m), dtype=complex)
     border = np.zeros((n + 1, n + 1), dtype=complex)
+    unit = np.zeros(n + 1, dtype=complex)
+    unit[n] = 1.0
+    rhs = np.zeros((n + 1, n_p), dtype=complex)
     for j in np.flatnonzero(lam_r != 0):  # rigid-body modes keep pole 0 and their real shape: derivatives 0
         s, x = complex(lam_r[j]), x_all[:, j]
-        q = (np.array([s * s, s, 1.0]) @ flat).reshape(n, n)
         mx = mass @ x
-        border[:n, :n] = q
+        border[:n, :n] = (np.array([s * s, s, 1.0]) @ flat).reshape(n, n)  # Q(s)
         border[:n, n] = 2 * s * mx + visc @ x  # Q'(s) x
         # the normalization row x^H dx = 0, scaled to Q's entries (partial pivoting compares rows)
-        border[n, :n] = np.abs(q).max() * x.conj() / np.vdot(x, x)
+        size = abs(s) ** 2 * biggest[0] + abs(s) * biggest[1] + biggest[2]
+        border[n, :n] = size * x.conj() / np.vdot(x, x)
         border[n, n] = 0.0
         lu, piv, info = getrf(border)
         if info != 0:
             msg = f"the bordered system of mode {j + 1} is singular (a repeated pole)"
             raise ModelError(msg)
-        unit = np.zeros(n + 1, dtype=complex)
-        unit[n] = 1.0
         left = getrs(lu, piv, unit, trans=1)[0][:n]  # u^T Q(s) = 0, u^T Q'(s) x = 1
-        rhs = np.zeros((n + 1, n_p), dtype=complex)
-        rhs[:n] = -(s * s * d_mass_x[:, :, j] + s * d_visc_x[:, :, j] + d_stiff_x[:, :, j]).T  # -dQ x
+        rhs[:n] = -(s * s * d_x[0][j] + s * d_x[1][j] + d_x[2][j])  # -dQ x, (n, n_p)
         solved = getrs(lu, piv, rhs)[0]
         dx, ds = solved[:n], solved[n]
         # the state expansion's gauge: w dv = u^T Q'(s) dx + ds u^T M x = 0
-        left_slope = 2 * s * (left @ mass) + left @ visc
-        dx += x[:, None] * (-(left_slope @ dx + ds * (left @ mx)))[None, :]
+        left_mass, left_visc = np.split(left @ mass_visc, 2)
+        dx += x[:, None] * (-((2 * s * left_mass + left_visc) @ dx + ds * (left_mass @ x)))[None, :]
         d_poles[:, j] = ds
-        d_shapes[:, :, j] = (sensors @ dx).T
+        dx_all[:, :, j] = dx
+    d_shapes = np.asarray((sensors @ dx_all.reshape(n, n_p * m)).reshape(sensors.shape[0], n_p, m).transpose(1, 0, 2),
+                          dtype=complex)
     return ExactModeDerivatives(
         poles=lam_r,
         shapes=sensors @ x_all,

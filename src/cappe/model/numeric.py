@@ -1205,7 +1205,8 @@ class NumericModel:
             part = jac[self._slices[name]]
             terms = np.flatnonzero(np.any(part != 0, axis=1))
             products = np.asarray(self._term_operators(pos)[name] @ cols).reshape(-1, n * m)  # (n_terms, n m)
-            result = (part[terms].T @ products[terms]).reshape(sel.size, n, m)
+            # each term moves with one or two parameters: the weighting is a sparse product too
+            result = np.asarray(sps.csr_array(part[terms].T) @ products[terms]).reshape(sel.size, n, m)
             func = self._residual_derivative_funcs.get(name)
             if func is not None:
                 with np.errstate(all="ignore"):
