@@ -5,7 +5,9 @@ modes (20 per position) at z2..z4 for identification and z1 = -0.294 m held out,
 N_opt = 100 local searches per subproblem, 10 permuted-damping models, default executor (threads, one per core).
 
 The run happens in a child process so that its peak memory (``ru_maxrss``) is its own. Every eigen-solve the run
-makes is counted by wrapping numpy's ``eigh`` and ``eig`` (matrices and their sizes); after the run the same
+makes is counted by wrapping numpy's ``eigh`` and ``eig``, scipy's ``eigh`` (generalized, the modal derivatives')
+and LAPACK's complex ``getrf`` (the exact modes' quadratic-eigenproblem factorizations) with the matrices' sizes;
+after the run the same
 number of solves of the same sizes is timed bare (batched LAPACK, BLAS on one thread): serially
 (``eigen_serial_s``), and split over one thread per core running at once (``bound_s``, the time no implementation
 of the same algorithm could beat on this machine: two cores of the shared test machine run bare ``eigh`` 1.45-2x
@@ -39,7 +41,14 @@ SETTINGS = {"n_gsa": 1024, "n_opt": 100, "n_permutations": 10}
 
 
 def _count_eigen_solves(counter: Counter[tuple[str, int, str]]) -> None:
-    """Wrap numpy.linalg.eigh / eig so that every solve adds (kind, n, dtype) to ``counter``."""
+    """Wrap the eigen-solvers so that every solve adds (kind, n, dtype) to ``counter``: numpy's ``eigh`` and ``eig``,
+    scipy's ``eigh`` (``"eigh-generalized"`` with a mass matrix: the modal derivatives' undamped modes, 39390 of
+    them in a three-axis identification, uncounted before issue 24's speed work) and LAPACK's complex ``getrf``
+    (``"lu"``: the factorizations the exact modes of one vector are solved and differentiated with on the quadratic
+    eigenproblem, see :class:`cappe.modal._engine.QuadraticModes`)."""
+    import scipy.linalg
+    import scipy.linalg.lapack
+
     originals = {"eigh": np.linalg.eigh, "eig": np.linalg.eig}
 
     def wrap(kind: str) -> Any:
@@ -55,6 +64,20 @@ def _count_eigen_solves(counter: Counter[tuple[str, int, str]]) -> None:
 
     np.linalg.eigh = wrap("eigh")
     np.linalg.eig = wrap("eig")
+    scipy_eigh, getrf = scipy.linalg.eigh, scipy.linalg.lapack.zgetrf
+
+    def counted_eigh(a: Any, b: Any = None, *args: Any, **kwargs: Any) -> Any:
+        arr = np.asarray(a)
+        kind = "eigh" if b is None else "eigh-generalized"
+        counter[(kind, arr.shape[-1], "complex" if np.iscomplexobj(arr) else "real")] += 1
+        return scipy_eigh(a, b, *args, **kwargs)
+
+    def counted_lu(a: Any, *args: Any, **kwargs: Any) -> Any:
+        counter[("lu", np.shape(a)[-1], "complex")] += 1
+        return getrf(a, *args, **kwargs)
+
+    scipy.linalg.eigh = counted_eigh
+    scipy.linalg.lapack.zgetrf = counted_lu
 
 
 def _count_engine_samples(counter: Counter[str]) -> None:
@@ -116,13 +139,25 @@ def _bare_seconds(kind: str, n: int, dtype: str, count: int, threads: int = 1) -
     rng = np.random.default_rng(0)
     sample = min(count, max(64, 2_000_000 // (n * n)))
     a = rng.standard_normal((sample, n, n))
-    if kind == "eigh":
+    if kind in ("eigh", "eigh-generalized"):
         a = a @ np.swapaxes(a, -1, -2) + n * np.eye(n)
     if dtype == "complex":
         a = a + 1j * rng.standard_normal((sample, n, n))
         if kind == "eigh":
             a = (a + np.conj(np.swapaxes(a, -1, -2))) / 2
-    func = np.linalg.eigh if kind == "eigh" else np.linalg.eig
+    func: Any = np.linalg.eigh if kind == "eigh" else np.linalg.eig
+    if kind == "eigh-generalized":  # scipy's K phi = lambda M phi, one at a time as the run solves them
+        import scipy.linalg
+
+        mass = a[::-1].copy()  # symmetric positive definite too
+
+        def func(stack: Any) -> Any:
+            return [scipy.linalg.eigh(k, m) for k, m in zip(stack, mass, strict=False)]
+    elif kind == "lu":  # LAPACK's complex getrf, one at a time
+        import scipy.linalg.lapack
+
+        def func(stack: Any) -> Any:
+            return [scipy.linalg.lapack.zgetrf(x) for x in stack]
     with single_threaded_blas(), ThreadPoolExecutor(threads) as pool:
         func(a[:2])
         list(pool.map(func, [a[:2]] * threads))  # threads started

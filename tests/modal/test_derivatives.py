@@ -257,3 +257,34 @@ def test_the_exact_jacobian_reuses_the_residuals_eigen_decomposition(slide, monk
     problem.residuals(p)
     problem.jacobian(p)
     assert len(calls) == len(positions)
+
+
+def test_exact_mode_derivatives_on_the_quadratic_eigenproblem_equal_the_full_expansion(slide, monkeypatch):
+    # issue 24: modes solved on the quadratic eigenproblem are differentiated by the bordered (Nelson-type) system,
+    # one LU per mode; against the state matrix's eig and modal expansion written in this file, to round-off, in the
+    # expansion's own gauge (no component along the mode) and free of it
+    import cappe.modal._engine as engine_module
+
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)
+    model = NumericModel(slide)
+    engine = ModalEngine(model, n_modes=6, n_workers=1)
+    position = {"z": 0.25}
+    p = model.nominal * np.random.default_rng(5).uniform(0.8, 1.2, model.nominal.size)
+    names = ["km", "cm", "eta", "ms", "kg0", "Fp"]
+    poles = engine.evaluate(p, position, exact=True).poles[0]
+    assert engine._quadratic_modes(p, position) is not None
+    assert engine._state_eigensystem(p, position) is None  # no eig of the state matrix was made
+    d = exact_mode_derivatives(engine, p, position, poles=poles[[4, 1, 2]], parameters=names)
+    sensors = engine.sensor_rows(position)[1]
+    lam, shapes, d_poles, d_shapes = _reference_exact_derivatives(model, p, position, poles[[4, 1, 2]], names,
+                                                                   sensors)
+    np.testing.assert_allclose(d.poles, lam, rtol=1e-12)
+    np.testing.assert_allclose(d.d_poles, d_poles, rtol=1e-9, atol=1e-11 * np.abs(d_poles).max())
+    unit, d_unit = _gauge_free(d.shapes, d.d_shapes)
+    unit_ref, d_unit_ref = _gauge_free(shapes, d_shapes)
+    np.testing.assert_allclose(unit, unit_ref, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(d_unit, d_unit_ref, rtol=0, atol=1e-9 * np.abs(d_unit_ref).max())
+    # the same gauge as the expansion: the derivatives of the shapes scaled as the reference's are the reference's
+    scale = shapes[0] / d.shapes[0]
+    np.testing.assert_allclose(d.d_shapes * scale[None, None, :], d_shapes, rtol=0,
+                               atol=1e-9 * np.abs(d_shapes).max())

@@ -482,3 +482,94 @@ def test_varying_masses_on_a_flexible_body_scale_the_nominal_factor_and_give_the
         if i < 2:
             ref = system.modes("exact")
             np.testing.assert_allclose(np.sort_complex(exact.poles[i]), np.sort_complex(ref.poles), rtol=1e-9)
+
+
+def _state_matrix_poles(model: NumericModel, params: np.ndarray, position) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues and displacement eigenvectors of the state matrix, by scipy's eig (written here, from the
+    assembled matrices: no cappe modal code)."""
+    mats = model.matrices(params, position)
+    n = model.n_dof
+    minv = np.linalg.inv(mats["M"])
+    state = np.zeros((2 * n, 2 * n), dtype=complex)
+    state[:n, n:] = np.eye(n)
+    state[n:, :n] = -minv @ (mats["K"] + 1j * mats["H"])
+    state[n:, n:] = -minv @ (mats["C"] + mats["G"])
+    lam, vec = scipy.linalg.eig(state)
+    return lam, vec[:n]
+
+
+def _assert_equal_to_the_state_matrix(model, params, position, batch):
+    lam, vec = _state_matrix_poles(model, params, position)
+    for r, pole in enumerate(batch.poles[0]):
+        k = int(np.argmin(np.abs(lam - pole)))
+        # eig of the 2 n state matrix is accurate to ~1e-16 of its norm: 1e-11 of the pole on these models
+        np.testing.assert_allclose(pole, lam[k], rtol=1e-11)
+        a = batch.complex_shapes[0][:, r]
+        b = vec[:, k]
+        mac = abs(np.vdot(a, b)) ** 2 / (np.vdot(a, a).real * np.vdot(b, b).real)
+        assert mac == pytest.approx(1.0, abs=1e-11)
+
+
+@pytest.mark.parametrize("position", [{"z": 0.1}, {"z": 0.4}])
+def test_quadratic_exact_modes_equal_scipy_eig_of_the_state_matrix(slide, position, monkeypatch):
+    # issue 24: few modes of one vector are solved on the quadratic eigenproblem, mode by mode from the undamped
+    # ones; against scipy's eig of the state matrix, and bit-close to the engine's full-eig path
+    import cappe.modal._engine as engine_module
+
+    model = NumericModel(slide)
+    p = random_params(model, 1, 11)[0]
+    full = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1).evaluate(p, position, exact=True)  # the state eig
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)  # 6 of 12 modes
+    engine = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1)
+    batch = engine.evaluate(p, position, exact=True)
+    assert engine.exact_solves == {"quadratic": 1, "fallback": 0}
+    assert engine._quadratic_modes(p, position) is not None
+    _assert_equal_to_the_state_matrix(model, p, position, batch)
+    # the same pairing and the same shape scaling (phi_r^T M x_r = 1) as the full path
+    np.testing.assert_allclose(batch.poles, full.poles, rtol=1e-12)
+    np.testing.assert_allclose(batch.complex_shapes, full.complex_shapes, rtol=0,
+                               atol=1e-10 * np.abs(full.complex_shapes).max())
+
+
+@pytest.mark.parametrize("split", [0.0, 1e-7, 1e-3])
+def test_quadratic_exact_modes_of_repeated_and_close_frequencies(split, monkeypatch):
+    # issue 24: a mass on springs of (nearly) equal x and y stiffness, a damper at 30 degrees coupling x and y: the
+    # undamped shapes are any pair of the plane (repeated) or x and y (close), the damped ones are mixed. Either the
+    # quadratic solve finds both modes or it misses and falls back to the state eig, counted; the poles and shapes
+    # equal scipy's eig of the state matrix either way
+    import cappe.modal._engine as engine_module
+
+    b = StructureBuilder("close")
+    b.parameter("k", 1.0e6, kind="stiffness")
+    b.parameter("c", 40.0, kind="damping")
+    b.body("m", mass=1.0, inertia={"xx": 1, "yy": 1, "zz": 1}, dofs=["x", "y"])
+    b.element("s", bodies=("ground", "m"), stiffness={"x": "k", "y": f"k*(1 + {split})"})
+    b.element("d", bodies=("ground", "m"), axes={"x": [np.cos(np.pi / 6), np.sin(np.pi / 6), 0.0],
+                                                 "y": [-np.sin(np.pi / 6), np.cos(np.pi / 6), 0.0]},
+              damping={"x": "c"})
+    model = NumericModel(b.build())
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 1.0)
+    engine = ModalEngine(model, sensors="dofs", n_workers=1)
+    batch = engine.evaluate(None, None, exact=True)
+    assert sum(engine.exact_solves.values()) == 1
+    assert np.all(np.isfinite(batch.poles))
+    _assert_equal_to_the_state_matrix(model, model.nominal, None, batch)
+    assert abs(batch.poles[0, 0] - batch.poles[0, 1]) > 1e-6 * abs(batch.poles[0, 0])  # two poles, not one twice
+
+
+def test_a_quadratic_mode_that_misses_falls_back_to_the_state_eig_and_is_counted(slide, monkeypatch):
+    # issue 24: no inverse-iteration step allowed, so every mode misses: the exact modes come from the state eig,
+    # the miss is counted, and nothing is kept for the quadratic derivatives
+    import cappe.modal._engine as engine_module
+
+    model = NumericModel(slide)
+    p = random_params(model, 1, 4)[0]
+    full = ModalEngine(model, n_modes=6, n_workers=1).evaluate(p, {"z": 0.1}, exact=True)
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)
+    monkeypatch.setattr(engine_module, "QUADRATIC_STEPS", 0)
+    engine = ModalEngine(model, n_modes=6, n_workers=1)
+    batch = engine.evaluate(p, {"z": 0.1}, exact=True)
+    assert engine.exact_solves == {"quadratic": 0, "fallback": 1}
+    assert engine._quadratic_modes(p, {"z": 0.1}) is None
+    assert engine._state_eigensystem(p, {"z": 0.1}) is not None
+    np.testing.assert_array_equal(batch.poles, full.poles)

@@ -305,3 +305,21 @@ def test_a_position_factor_undefined_at_a_position_is_an_error_naming_the_entry(
         nm.matrices(None, {"z": -2.0})
     with pytest.raises(ModelError, match=r"^elements\[1\]\.stiffness\.x: evaluates to nan at z = -4, k = 10000$"):
         nm.matrices(None, {"z": -4.0})
+
+
+def test_matrix_derivative_products_equal_the_derivative_matrices_times_the_vectors(slide):
+    # issue 24: the products are formed from the sparse patterns without the dense (n_p, n, n) stacks; against
+    # matrix_derivatives @ V (a coefficient non-linear in its parameters, kg0 (Fp / 1000)^(1/3), included)
+    nm = NumericModel(slide)
+    rng = np.random.default_rng(2)
+    p = nm.nominal * rng.uniform(0.8, 1.2, nm.nominal.size)
+    vectors = rng.standard_normal((nm.n_dof, 3)) + 1j * rng.standard_normal((nm.n_dof, 3))
+    names = ["kg0", "Fp", "eta", "ms", "cm"]
+    products = nm.matrix_derivative_products(p, {"z": 0.25}, vectors, parameters=names)
+    dense = nm.matrix_derivatives(p, {"z": 0.25}, parameters=names)
+    for name, stack in dense.items():
+        # the same sums in another order: round-off of the largest term
+        np.testing.assert_allclose(products[name], stack @ vectors, rtol=0,
+                                   atol=1e-13 * max(np.abs(stack).max(), 1e-300) * np.abs(vectors).max())
+    with pytest.raises(ModelError, match=r"vectors must have shape \(n_dof, m\) = \(12, m\); got \(3,\)"):
+        nm.matrix_derivative_products(p, {"z": 0.25}, vectors[:3, 0])

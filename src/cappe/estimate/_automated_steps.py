@@ -337,10 +337,12 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
         est = found.estimate
         return JointRefinement(est, found.cost_function, found.cost_before, float(est.cost), bool(est.success),
                                est.message, found.evaluations, found.relative_change, None, found.values)
+    candidates = pairing_candidates(setup.model, ident_ref, space.full(current))
     problem = ExactModalProblem(setup.model, space, ident_ref, settings.weights, settings.noise,
-                                executor=setup.runner, shapes=settings.shapes)
+                                executor=setup.runner, shapes=settings.shapes, n_modes=candidates)
     r0 = problem.residuals(current)
-    diagnostics: dict[str, Any] = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)"}
+    diagnostics: dict[str, Any] = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)",
+                                   "pairing_candidates": candidates}
     start = np.clip(current, space.lower, space.upper)
     fitted = least_squares_fit(setup.method, space, problem.residuals, problem.jacobian, starts=start[None, :],
                                diagnostics=diagnostics, variance_floor=MODAL_VARIANCE_FLOOR)
@@ -370,11 +372,48 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
         how = str(est.diagnostics["uncertainty"]["std"])
         r = problem.residuals(values)
         est = replace(est, diagnostics={**est.diagnostics, "weighting": problem.weighting,
-                                        "shapes": problem.shapes, "residuals": int(r.size)})
+                                        "shapes": problem.shapes, "residuals": int(r.size),
+                                        "exact_solves": problem.engine.exact_solves})
     return JointRefinement(
         est, fitted.cost, float(r0 @ r0), float(est.cost), bool(est.success), est.message, problem.evaluations,
         {n: float(v / c - 1.0) for n, v, c in zip(space.names, est.values, current, strict=True)},
         problem.pairing_report(values), values, uncertainty=how, weighting=problem.weighting, shapes=problem.shapes)
+
+
+#: The exact joint refinement pairs the reference modes of a set with the model modes up to this factor above the
+#: set's highest reference frequency (at the refinement's start), and at least with as many as the reference has plus
+#: PAIRING_MARGIN: the exact modes are then solved for those only (quadratic eigenproblem, mode by mode) instead of
+#: all n_dof (one eig of the 2 n_dof state matrix).
+PAIRING_BAND = 1.25
+PAIRING_MARGIN = 5
+
+
+def pairing_candidates(model: NumericModel, reference: ModalData, full: NDArray[np.float64]) -> int:
+    """How many of the lowest model modes may pair with the reference in the exact joint refinement: per set, those
+    up to :data:`PAIRING_BAND` times its highest reference frequency at the vector ``full`` (undamped modes), at
+    least the set's mode count plus :data:`PAIRING_MARGIN`; the largest over the sets, at most ``n_dof``.
+
+    Parameters
+    ----------
+    model : NumericModel
+        The model.
+    reference : ModalData
+        The reference modes (Hz) at their positions.
+    full : ndarray, shape (n_params,)
+        The model's parameter vector (SI).
+
+    Returns
+    -------
+    int
+        The number of candidate modes.
+    """
+    engine = ModalEngine(model, sensors="dofs")
+    count = 0
+    for data_set in reference.sets:
+        freq = engine.evaluate(full, model.structure.resolve_position(data_set.position)).frequency[0]
+        band = int(np.count_nonzero(freq <= PAIRING_BAND * float(np.max(data_set.frequency))))
+        count = max(count, band, data_set.n_modes + PAIRING_MARGIN)
+    return min(model.n_dof, count)
 
 
 def frf_refinement_step(setup: Setup, start: Array) -> FRFRefinement:

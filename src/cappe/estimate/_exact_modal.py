@@ -245,7 +245,8 @@ class ExactModalProblem:
         return self._evaluate(np.asarray(p, dtype=float))[0]
 
     def jacobian(self, p: Array) -> Array:
-        """``d r / d p`` (n_r, n), analytic: first-order perturbation of the state matrix's eigen-decomposition
+        """``d r / d p`` (n_r, n), analytic: first-order perturbation of the state matrix's eigen-decomposition, or
+        of each mode's quadratic eigenproblem where the engine solved the modes that way
         (:func:`cappe.modal.exact_mode_derivatives`), one per set instead of one per unknown; the residuals are
         invariant to the complex scale of a shape, which the shape derivatives leave out.
 

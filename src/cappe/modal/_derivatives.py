@@ -13,7 +13,12 @@ the modal expansion is exact here because all n modes are known):
 Exact complex modes (:func:`exact_mode_derivatives`): with the state matrix ``A V = V Lambda`` and ``W = V^-1``, a
 parameter change ``dA`` moves pole r by ``(W dA V)_rr`` and its eigenvector by
 ``sum_{s != r} (W dA V)_sr / (lambda_r - lambda_s) v_s`` plus a multiple of ``v_r`` (a change of the arbitrary
-complex scale, left out).
+complex scale, left out). When the engine solved the modes of the same vector on the quadratic eigenproblem
+``Q(s) x = (s^2 M + s (C + G) + K + iH) x = 0`` (:class:`~cappe.modal._engine.QuadraticModes`, few modes of a large
+model), each mode is differentiated on it instead, by the bordered (Nelson-type) system
+``[[Q(s), Q'(s) x], [x^H, 0]] [dx; ds] = -[dQ x; 0]`` (one complex LU of order n + 1 per mode, every parameter a
+right-hand side), and ``dx`` is given the state expansion's gauge: no component along the mode, ``w dv = 0`` for the
+state vectors ``v = (x, s x)``, ``w = (u^T (s M + C + G), s u^T M)`` with the left eigenvector ``u^T Q(s) = 0``.
 """
 
 from __future__ import annotations
@@ -25,11 +30,12 @@ from typing import Any
 
 import numpy as np
 import pandas as pd
+import scipy.linalg
 import scipy.sparse as sps
 from numpy.typing import ArrayLike, NDArray
 
 from cappe.exceptions import IllConditionedWarning, ModelError
-from cappe.modal._engine import ModalEngine, ModeReference, StateEigensystem, _track
+from cappe.modal._engine import ModalEngine, ModeReference, QuadraticModes, StateEigensystem, _track
 from cappe.model.numeric import NumericModel, ParamsLike
 from cappe.model.structure import Structure
 from cappe.systems.mechanical import MechanicalSystem
@@ -373,6 +379,12 @@ def exact_mode_derivatives(
     full = model.vector(params)
     names = tuple(model.parameter_names) if parameters is None else tuple(parameters)
     n = model.n_dof
+    quadratic = engine._quadratic_modes(full, position)
+    if quadratic is not None:
+        requested = np.atleast_1d(np.asarray(poles))
+        picked = np.array([int(np.argmin(np.abs(quadratic.poles - pole))) for pole in requested], dtype=np.intp)
+        if np.all(np.abs(quadratic.poles[picked] - requested) <= 1e-12 * np.abs(requested)):
+            return _quadratic_mode_derivatives(engine, quadratic, picked, full, position, names)
     # the decomposition the engine made for the same vector (the residuals' exact modes), else one here
     system = engine._state_eigensystem(full, position)
     if system is None:
@@ -413,6 +425,70 @@ def exact_mode_derivatives(
         shapes=sensors @ v_q,
         d_poles=np.asarray(d_poles, dtype=complex).reshape(n_p, m),
         d_shapes=np.ascontiguousarray(d_shapes.transpose(1, 0, 2), dtype=complex),
+        parameter_names=names,
+        sensors=labels,
+    )
+
+
+def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, picked: NDArray[np.intp], full: Array,
+                                position: Mapping[str, float] | None, names: tuple[str, ...]) -> ExactModeDerivatives:
+    """:func:`exact_mode_derivatives` of the modes ``picked`` of the quadratic-eigenproblem solution ``modes``: per
+    mode one LU of the bordered system (module notes), every parameter at once."""
+    model = engine.model
+    mats = modes.mats
+    mass, visc = mats["M"], mats["C"] + mats["G"]
+    stiff = mats["K"] + 1j * mats["H"]
+    labels, sensors = engine.sensor_rows(position)
+    n, n_p, m = model.n_dof, len(names), picked.size
+    lam_r = modes.poles[picked]
+    x_all = modes.shapes[:, picked]
+    # dX x per parameter for every picked mode, (n_p, n, m), from the model's sparse patterns
+    products = model.matrix_derivative_products(full, position, x_all, parameters=list(names))
+    d_stiff_x = products["K"] + 1j * products["H"]
+    d_visc_x = products["C"] + products["G"]
+    d_mass_x = products["M"]
+    flat = np.stack([mass, visc, stiff]).astype(complex).reshape(3, n * n)  # Q(s) = (s^2, s, 1) @ flat
+    # u^T M and u^T (C + G) in one product with complex operands (a real matrix times a complex vector is copied)
+    mass_visc = np.concatenate([mass, visc], axis=1).astype(complex)
+    biggest = (float(np.abs(mass).max()), float(np.abs(visc).max()), float(np.abs(stiff).max()))
+    # -dQ x per mode, laid out (m, n, n_p) for the right-hand sides
+    d_x = [np.ascontiguousarray(a.transpose(2, 1, 0)) for a in (d_mass_x, d_visc_x, d_stiff_x)]
+    getrf, getrs = scipy.linalg.lapack.zgetrf, scipy.linalg.lapack.zgetrs
+    d_poles = np.zeros((n_p, m), dtype=complex)
+    dx_all = np.zeros((n, n_p, m), dtype=complex)
+    border = np.zeros((n + 1, n + 1), dtype=complex)
+    unit = np.zeros(n + 1, dtype=complex)
+    unit[n] = 1.0
+    rhs = np.zeros((n + 1, n_p), dtype=complex)
+    for j in np.flatnonzero(lam_r != 0):  # rigid-body modes keep pole 0 and their real shape: derivatives 0
+        s, x = complex(lam_r[j]), x_all[:, j]
+        mx = mass @ x
+        border[:n, :n] = (np.array([s * s, s, 1.0]) @ flat).reshape(n, n)  # Q(s)
+        border[:n, n] = 2 * s * mx + visc @ x  # Q'(s) x
+        # the normalization row x^H dx = 0, scaled to Q's entries (partial pivoting compares rows)
+        size = abs(s) ** 2 * biggest[0] + abs(s) * biggest[1] + biggest[2]
+        border[n, :n] = size * x.conj() / np.vdot(x, x)
+        border[n, n] = 0.0
+        lu, piv, info = getrf(border)
+        if info != 0:
+            msg = f"the bordered system of mode {j + 1} is singular (a repeated pole)"
+            raise ModelError(msg)
+        left = getrs(lu, piv, unit, trans=1)[0][:n]  # u^T Q(s) = 0, u^T Q'(s) x = 1
+        rhs[:n] = -(s * s * d_x[0][j] + s * d_x[1][j] + d_x[2][j])  # -dQ x, (n, n_p)
+        solved = getrs(lu, piv, rhs)[0]
+        dx, ds = solved[:n], solved[n]
+        # the state expansion's gauge: w dv = u^T Q'(s) dx + ds u^T M x = 0
+        left_mass, left_visc = np.split(left @ mass_visc, 2)
+        dx += x[:, None] * (-((2 * s * left_mass + left_visc) @ dx + ds * (left_mass @ x)))[None, :]
+        d_poles[:, j] = ds
+        dx_all[:, :, j] = dx
+    d_shapes = np.asarray((sensors @ dx_all.reshape(n, n_p * m)).reshape(sensors.shape[0], n_p, m).transpose(1, 0, 2),
+                          dtype=complex)
+    return ExactModeDerivatives(
+        poles=lam_r,
+        shapes=sensors @ x_all,
+        d_poles=d_poles,
+        d_shapes=d_shapes,
         parameter_names=names,
         sensors=labels,
     )

@@ -419,6 +419,7 @@ class NumericModel:
         self._entry_values: tuple[list[tuple[str, str, sp.Expr]], Any] | None = None
         self._compile_damping_sources()
         self._sparse_cache: dict[tuple[float, ...], dict[str, tuple[NDArray[np.intp], sps.csr_array]]] = {}
+        self._term_cache: dict[tuple[float, ...], dict[str, sps.csr_array]] = {}
         #: per position, the largest coefficient magnitude no assembled entry can overflow with
         self._safe_coefficient: dict[tuple[float, ...], float] = {}
         # derivatives of the affine coefficients (only the structurally non-zero ones) and of residual terms
@@ -1124,24 +1125,8 @@ class NumericModel:
             msg = "matrix_derivatives takes a single parameter vector"
             raise ModelError(msg)
         pos = self.position_vector(position)
-        n, n_p = self.n_dof, len(self.parameter_names)
-        if parameters is None:
-            sel = np.arange(n_p)
-        else:
-            unknown = [name for name in parameters if name not in self.parameter_names]
-            if unknown:
-                msg = f"unknown parameters {unknown} for model '{self.structure.name}'"
-                raise ModelError(msg)
-            sel = np.array([self.parameter_names.index(name) for name in parameters], dtype=np.intp)
-        jac = np.zeros((self._n_coef, n_p))
-        if self._jacobian_entries.size:
-            coefficient, parameter = self._jacobian_entries.T
-            try:
-                jac[coefficient, parameter] = self._coefficients.jacobian(p[None, :], pos)[0]
-            except _NonFinite as exc:
-                columns = self._derivative_columns(self._coefficients.entries, self._coefficient_columns())
-                raise self._nonfinite_error(p[None, :], pos, exc.values, columns, exc.cause) from None
-        jac = jac[:, sel]
+        n = self.n_dof
+        jac, sel = self._coefficient_jacobian(p, pos, parameters)
         patterns = self._patterns(pos)
         out: dict[str, Array] = {}
         for name in names:
@@ -1160,6 +1145,110 @@ class NumericModel:
                     raise self._nonfinite_error(p[None, :], pos)
             out[name] = deriv
         return out
+
+    def matrix_derivative_products(
+        self,
+        params: ParamsLike,
+        position: Mapping[str, float] | None,
+        vectors: NDArray[Any],
+        names: Sequence[str] = MATRIX_NAMES,
+        *,
+        parameters: Sequence[str] | None = None,
+    ) -> dict[str, NDArray[Any]]:
+        """The derivative matrices of :meth:`matrix_derivatives` times ``vectors``, without forming them.
+
+        Each derivative is a sum of the model's constant patterns weighted by coefficient derivatives; the patterns
+        times ``vectors`` are one sparse product (per position, the patterns are kept sparse), so the cost does not
+        grow with ``n_params * n_dof^2`` (the dense derivative stacks of a 162-DOF machine with 61 unknowns are 13 MB
+        per matrix).
+
+        Parameters
+        ----------
+        params : array (n_params,), mapping or None
+            One parameter vector (SI), overrides by name, or None (nominal).
+        position : mapping axis -> float, optional
+            Axis position (m or rad).
+        vectors : ndarray, shape (n_dof, m)
+            Real or complex columns.
+        names : sequence of str
+            The matrices wanted.
+        parameters : sequence of str, optional
+            Parameters to differentiate by (default all).
+
+        Returns
+        -------
+        dict
+            ``{name: ndarray (n_parameters, n_dof, m)}``: ``dX / dp_i @ vectors``.
+
+        Examples
+        --------
+        >>> from cappe.model import load_model
+        >>> nm = NumericModel(load_model("builtin:two-mass-rig"))
+        >>> nm.matrix_derivative_products(None, None, np.eye(2), ("K",), parameters=["k12"])["K"][0]
+        array([[ 1., -1.],
+               [-1.,  1.]])
+        """
+        p = self.vector(params)
+        if p.ndim != 1:
+            msg = "matrix_derivative_products takes a single parameter vector"
+            raise ModelError(msg)
+        pos = self.position_vector(position)
+        n = self.n_dof
+        cols = np.asarray(vectors)
+        if cols.ndim != 2 or cols.shape[0] != n:
+            msg = f"vectors must have shape (n_dof, m) = ({n}, m); got {cols.shape}"
+            raise ModelError(msg)
+        m = cols.shape[1]
+        jac, sel = self._coefficient_jacobian(p, pos, parameters)
+        out: dict[str, NDArray[Any]] = {}
+        for name in names:
+            part = jac[self._slices[name]]
+            terms = np.flatnonzero(np.any(part != 0, axis=1))
+            products = np.asarray(self._term_operators(pos)[name] @ cols).reshape(-1, n * m)  # (n_terms, n m)
+            # each term moves with one or two parameters: the weighting is a sparse product too
+            result = np.asarray(sps.csr_array(part[terms].T) @ products[terms]).reshape(sel.size, n, m)
+            func = self._residual_derivative_funcs.get(name)
+            if func is not None:
+                with np.errstate(all="ignore"):
+                    mats = func(*p, *_scalars(pos))
+                    extra = np.stack([np.asarray(mats[column], dtype=float) for column in sel])
+                if not np.isfinite(extra).all():
+                    raise self._nonfinite_error(p[None, :], pos)
+                result = result + extra @ cols
+            out[name] = result
+        return out
+
+    def _term_operators(self, pos: tuple[float, ...]) -> dict[str, sps.csr_array]:
+        """Per matrix: its patterns stacked as rows, (n_terms n, n) sparse, so that one product with (n, m) columns
+        gives every pattern times them (cached per position)."""
+        cached = self._term_cache.get(pos)
+        if cached is None:
+            n = self.n_dof
+            cached = {name: sps.csr_array(dense.reshape(-1, n)) for name, dense in self._patterns(pos).items()}
+            self._term_cache[pos] = cached
+        return cached
+
+    def _coefficient_jacobian(self, p: Array, pos: tuple[float, ...],
+                              parameters: Sequence[str] | None) -> tuple[Array, NDArray[np.intp]]:
+        """``d coefficient / d parameter`` (n_coef, n_selected) at one vector, and the selected parameter columns."""
+        n_p = len(self.parameter_names)
+        if parameters is None:
+            sel = np.arange(n_p)
+        else:
+            unknown = [name for name in parameters if name not in self.parameter_names]
+            if unknown:
+                msg = f"unknown parameters {unknown} for model '{self.structure.name}'"
+                raise ModelError(msg)
+            sel = np.array([self.parameter_names.index(name) for name in parameters], dtype=np.intp)
+        jac = np.zeros((self._n_coef, n_p))
+        if self._jacobian_entries.size:
+            coefficient, parameter = self._jacobian_entries.T
+            try:
+                jac[coefficient, parameter] = self._coefficients.jacobian(p[None, :], pos)[0]
+            except _NonFinite as exc:
+                columns = self._derivative_columns(self._coefficients.entries, self._coefficient_columns())
+                raise self._nonfinite_error(p[None, :], pos, exc.values, columns, exc.cause) from None
+        return jac[:, sel], sel
 
     def io_matrices(
         self, params: ParamsLike = None, position: Mapping[str, float] | None = None
