@@ -24,7 +24,14 @@ from threadpoolctl import threadpool_info, threadpool_limits
 from cappe.estimate._automated import AutomatedIdentification
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, load_model
-from cappe.parallel import Executor, blas_threads, command_blas_threads, map_chunks, single_threaded_blas
+from cappe.parallel import (
+    Executor,
+    blas_threads,
+    command_blas_threads,
+    map_chunks,
+    shared_loads,
+    single_threaded_blas,
+)
 
 BENCH = Path(__file__).parent / "data" / "bench-slide.yaml"
 POSITIONS = [{"z": -0.2}, {"z": 0.0}, {"z": 0.3}]
@@ -36,6 +43,27 @@ def _square_chunk(offset: float):
         return [offset + k * k for k in range(s.start, s.stop)]
 
     return work
+
+
+def _warning_chunk(odd: str):
+    # a closure, shipped by value: warns on the odd chunks
+    def work(s: slice) -> int:
+        import warnings
+
+        if s.start % 2:
+            warnings.warn(f"chunk {s.start} {odd}", UserWarning, stacklevel=1)
+        return s.start
+
+    return work
+
+
+@pytest.mark.parametrize("kind", ["serial", "processes"])
+def test_warnings_raised_in_workers_reach_the_caller(kind):
+    # a worker process's warnings were lost: the user saw them on a serial run only
+    with Executor(kind, n_workers=2) as ex, pytest.warns(UserWarning, match="chunk") as caught:
+        out = ex.map(_warning_chunk("is odd"), [slice(k, k + 1) for k in range(5)])
+    assert out == [0, 1, 2, 3, 4]
+    assert [str(w.message) for w in caught] == ["chunk 1 is odd", "chunk 3 is odd"]
 
 
 @pytest.mark.parametrize("kind", ["serial", "threads", "processes"])
@@ -198,6 +226,32 @@ def test_dask_cluster_gives_the_serial_results(bench, reference, serial_run, das
         np.testing.assert_array_equal(remote.poles, local.poles)
         # the whole pipeline, given as an address (the estimator opens and closes its own client)
     _same(_identify(bench, reference, dask_cluster), serial_run)
+
+
+@pytest.mark.slow
+def test_dask_ships_the_model_once_per_worker_not_per_task(bench, dask_cluster):
+    params = bench.nominal * np.random.default_rng(1).uniform(0.8, 1.2, size=(40, bench.nominal.size))
+    with Executor(dask_cluster) as ex:
+        before = ex.client.run(shared_loads)
+        engine = ModalEngine(bench, chunk_size=4, executor=ex)
+        batches = [engine.evaluate(params, position) for position in POSITIONS]  # 3 maps of 10 tasks
+        after = ex.client.run(shared_loads)
+    local = ModalEngine(bench, executor="serial")
+    for batch, position in zip(batches, POSITIONS, strict=True):
+        np.testing.assert_array_equal(batch.frequency, local.evaluate(params, position).frequency)
+    # per worker that ran tasks: the engine and its model, each unpickled once for the 30 tasks of the 3 maps
+    # (before: once per map for every worker, or once per task)
+    assert not any(before.values())  # the other tests' executors dropped theirs when they closed
+    assert any(after.values())
+    for counts in after.values():
+        assert sorted(counts.values()) in ([], [1, 1])
+    # a worker's warnings reach the caller, in item order
+    with Executor(dask_cluster) as ex, pytest.warns(UserWarning, match="chunk") as caught:
+        assert ex.map(_warning_chunk("on a worker"), [slice(k, k + 1) for k in range(4)]) == [0, 1, 2, 3]
+    assert [str(w.message) for w in caught] == ["chunk 1 on a worker", "chunk 3 on a worker"]
+    # closing the executor dropped the workers' copies
+    with Executor(dask_cluster) as ex:
+        assert not any(ex.client.run(shared_loads).values())
 
 
 @pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")

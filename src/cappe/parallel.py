@@ -39,6 +39,7 @@ import pickle
 import sys
 import threading
 import uuid
+import warnings
 from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
@@ -410,9 +411,11 @@ def _forget_shared(tokens: Sequence[str]) -> int:
 
 
 def shared_loads() -> dict[str, int]:
-    """How often this process unpickled each object shipped once (see :func:`ship_once`), by its reference.
+    """The objects shipped once (see :func:`ship_once`) that this process holds, by reference, and how often it
+    unpickled each.
 
-    A diagnostic for Dask workers (``client.run(shared_loads)``): every count is 1 when each object travelled once.
+    A diagnostic for Dask workers (``client.run(shared_loads)``): every count is 1 when each object travelled once;
+    a closed executor's objects are gone.
 
     Returns
     -------
@@ -423,7 +426,8 @@ def shared_loads() -> dict[str, int]:
     >>> isinstance(shared_loads(), dict)
     True
     """
-    return dict(_SHARED_LOADS)
+    with _WORKER_LOCK:
+        return {token: _SHARED_LOADS[token] for token in _WORKER_SHARED}
 
 
 class Executor:
@@ -607,14 +611,19 @@ class Executor:
 
 
 class _Pinned:
-    """A callable that runs ``func`` with BLAS on one thread (in whatever process it lands)."""
+    """A callable that runs ``func`` with BLAS on one thread (in whatever process it lands) and hands back its
+    value with the warnings it raised (``(category, message)`` pairs), which the calling process raises again:
+    a worker's warnings reach the user as a serial run's do. ``catch_warnings`` is process-wide state, so with
+    several threads per Dask worker a warning may be attributed to another task of that worker (not lost)."""
 
     def __init__(self, func: Callable[[Any], Any]) -> None:
         self.func = func
 
-    def __call__(self, item: Any) -> Any:
-        with single_threaded_blas():
-            return self.func(item)
+    def __call__(self, item: Any) -> tuple[Any, list[tuple[type[Warning], str]]]:
+        with single_threaded_blas(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            value = self.func(item)
+        return value, [(w.category, str(w.message)) for w in caught]
 
 
 _INSTALLED: Callable[[Any], Any] | None = None
@@ -636,11 +645,15 @@ def _run_installed(item: Any) -> Any:
 def _collect(finished: Any, index: dict[Any, int], items: list[Any], done: Callable[[Any], None] | None) -> list[Any]:
     """Results of ``finished`` futures (in completion order) put back in item order."""
     out: list[Any] = [None] * len(items)
+    raised: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
     for future in finished:
         k = index[future]
-        out[k] = future.result()
+        out[k], raised[k] = future.result()
         if done is not None:
             done(items[k])
+    for caught in raised:  # the workers' warnings, in item order (not the order the items finished in)
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=3)
     return out
 
 
