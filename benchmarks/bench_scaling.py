@@ -16,15 +16,16 @@ to ``benchmarks/results/scaling.json`` with a plot ``scaling.png``.
 generator of :mod:`benchmarks.bench_three_axis` at a random truth), run as a command in a child process: serially
 (``--executor serial``), then with ``--scheduler`` on a real local Dask cluster started here
 (``distributed.LocalCluster``: a scheduler and 1, 2, ... worker processes of one thread each, every process on one
-BLAS thread). The result files must be identical except their timings, and so must the printed text; the GSA, the
-subproblems and the validations run on the cluster, the refinements in the command's process. Default settings keep
-one run to minutes on a shared 2-core host: 2 identification positions, ``--n-gsa 16 --n-opt 4 --permutations 2
---first-order``; ``--full`` takes bench_three_axis's (4 positions, ``--n-gsa 64 --n-opt 10``, exact final
-refinement). On the first cluster, 200 trivial tasks that read the engine measure the cost per task (the first map
-ships the engine and its model, the second finds them on the workers). Reported (``results/scaling_dask.json``):
-wall and CPU seconds of the command and of the workers, the load, the stage times, and the parallel efficiency of
-the distributed stages against the smallest cluster, ``t_1 w_1 / (t_w w)`` on their wall times: meaningful only on a
-machine with a free core per worker (this host has 2 cores shared with other work: its load is recorded).
+BLAS thread). The result files must be identical except their timings, and so must the printed text and warnings.
+The GSA, the subproblems, the stiffness refinement's starts and the validations run on the cluster, the other steps
+in the command's process. Default settings keep one run to minutes on a shared 2-core host: 2 identification
+positions, ``--n-gsa 16 --n-opt 4 --permutations 2 --first-order``; ``--full`` takes bench_three_axis's (4
+positions, ``--n-gsa 64 --n-opt 10``, exact final refinement). On the first cluster, 200 trivial tasks that read the
+engine measure the cost per task (the first map ships the engine and its model, the second finds them on the
+workers). Reported (``results/scaling_dask.json``): wall and CPU seconds of the command and of the workers, the
+load, the stage times, and the parallel efficiency of the distributed stages against the smallest cluster,
+``t_1 w_1 / (t_w w)`` on their wall times: meaningful only on a machine with a free core per worker (this host has
+2 cores shared with other work: its load is recorded).
 """
 
 from __future__ import annotations
@@ -145,7 +146,8 @@ def _identify_cli(args: list[str], out: Any) -> dict[str, Any]:
         raise SystemExit(msg)
     text = [line for line in done.stdout.splitlines() if not line.startswith(("runtime:", "result (cappe."))]
     return {"wall_s": wall, "cpu_s": (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime),
-            "load": load, "doc": json.loads(out.read_text()), "text": text, "stderr": done.stderr.splitlines()}
+            "load": load, "doc": json.loads(out.read_text()), "text": text,
+            "warnings": [line for line in done.stderr.splitlines() if line.startswith("cappe: warning:")]}
 
 
 def _task_overhead(address: str, engine: Any, n_tasks: int) -> dict[str, float]:
@@ -217,6 +219,7 @@ def dask(argv: list[str]) -> None:
         reference_doc = _without_times(serial["doc"])
         diag = serial["doc"]["diagnostics"]
         rows.append({"executor": "serial", "workers": 1, "wall_s": serial["wall_s"], "cpu_s": serial["cpu_s"],
+                     "warnings": len(serial["warnings"]),
                      "load": serial["load"], "stages_s": diag["timings"], "stages_cpu_s": diag["cpu_timings"]})
         print(f"serial: {serial['wall_s']:.1f} s wall, {serial['cpu_s']:.1f} s CPU, load {serial['load']:.1f}; "
               f"stages (wall s): {', '.join(f'{k} {v:.1f}' for k, v in diag['timings'].items())}", flush=True)
@@ -230,11 +233,12 @@ def dask(argv: list[str]) -> None:
                 cpu_after = client.run(time.process_time)
             worker_cpu = sum(cpu_after[w] - cpu_before[w] for w in cpu_after)
             diffs = _differences(_without_times(run["doc"]), reference_doc)
-            same_text = run["text"] == serial["text"]
+            same_text = run["text"] == serial["text"] and run["warnings"] == serial["warnings"]
             diag = run["doc"]["diagnostics"]
             row = {"executor": "dask LocalCluster", "workers": n, "wall_s": run["wall_s"], "client_cpu_s": run["cpu_s"],
                    "worker_cpu_s": worker_cpu, "load": run["load"], "identical": not diffs, "differences": diffs,
-                   "identical_text": same_text, "stages_s": diag["timings"], "stages_cpu_s": diag["cpu_timings"]}
+                   "identical_text": same_text, "warnings": len(run["warnings"]), "stages_s": diag["timings"],
+                   "stages_cpu_s": diag["cpu_timings"]}
             if overhead is not None:
                 row["task_overhead"] = overhead
                 print(f"per task on {n} worker(s): {1e3 * overhead['first_map_s_per_task']:.2f} ms (first map, ships "
@@ -244,9 +248,9 @@ def dask(argv: list[str]) -> None:
             rows.append(row)
             print(f"dask, {n} worker(s): {run['wall_s']:.1f} s wall, CPU client {run['cpu_s']:.1f} s + workers "
                   f"{worker_cpu:.1f} s, load {run['load']:.1f}; result file identical to serial: {not diffs} "
-                  f"{diffs[:3]}, text identical: {same_text}; stages (wall s): "
+                  f"{diffs[:3]}, text and warnings identical: {same_text}; stages (wall s): "
                   f"{', '.join(f'{k} {v:.1f}' for k, v in diag['timings'].items())}", flush=True)
-    distributed_stages = ("gsa", "stiffness_subproblems", "validation")
+    distributed_stages = ("gsa", "stiffness_subproblems", "stiffness_refinement", "validation")
     base = next((r for r in rows if r.get("workers") == workers[0] and r["executor"] != "serial"), None)
     for row in rows:
         if row["executor"] != "serial" and base is not None:
