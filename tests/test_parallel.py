@@ -264,3 +264,44 @@ def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
         left = subprocess.run([sys.executable, "-c", code], env={**env, **extra}, capture_output=True, text=True,
                               check=True)
         assert left.stdout.split() == ["False", "False"], extra
+
+
+def _without_seconds(doc):
+    """A result document without its timings (the stages', each subproblem's)."""
+    if isinstance(doc, dict):
+        return {k: _without_seconds(v) for k, v in doc.items() if k not in ("timings", "cpu_timings", "seconds")}
+    if isinstance(doc, list):
+        return [_without_seconds(v) for v in doc]
+    return doc
+
+
+@pytest.mark.slow
+@pytest.mark.extended(reason=(
+    "a whole identification on the three-axis machine (61 unknowns, 162 DOF) on a LocalCluster; the same contract on "
+    "a smaller model: test_dask_cluster_gives_the_serial_results"))
+def test_three_axis_identification_on_a_local_cluster_equals_serial():
+    from distributed import LocalCluster
+
+    from cappe.estimate import ParameterSpace
+
+    machine = NumericModel(load_model("builtin:three-axis-machine-tool"))
+    space = ParameterSpace.from_model(machine)
+    truth = space.mapping(space.lower * (space.upper / space.lower) ** np.random.default_rng(3).uniform(size=space.n))
+    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
+    reference = ModalEngine(machine, n_modes=10).modal_data(positions, params=truth)
+
+    def identify(executor) -> AutomatedIdentification:
+        return AutomatedIdentification(machine, n_gsa=4, n_opt=2, rng=2, validation=positions[0], n_permutations=2,
+                                       exact=False, executor=executor).fit(reference)
+
+    serial = identify("serial")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with Executor(cluster.scheduler_address) as ex:
+            remote = identify(ex)
+            loads = ex.client.run(shared_loads)
+    _same(remote, serial)
+    # the whole result file but its wall and CPU seconds (json: NaN equals NaN)
+    docs = [_without_seconds(run.result_.to_dict()) for run in (remote, serial)]
+    assert json.dumps(docs[0], sort_keys=True) == json.dumps(docs[1], sort_keys=True)
+    # the model and the engines of the GSA and the subproblems: each unpickled at most once per worker
+    assert all(set(counts.values()) <= {1} for counts in loads.values())
