@@ -298,8 +298,8 @@ def retain_freed_memory() -> bool:
 _SHIPPED_ONCE: dict[type, tuple[str, ...]] = {}
 
 
-def ship_once(cls: type, caches: Sequence[str] = ()) -> type:
-    """Register ``cls``: on a Dask executor its objects travel to each worker once, not with every map.
+def ship_once(shipped: type, caches: Sequence[str] = ()) -> type:
+    """Register the class ``shipped``: on a Dask executor its objects travel to each worker once, not with every map.
 
     For immutable objects that many maps read (a compiled model, a modal engine): the worker keeps its copy,
     unpickled once, until the executor closes. The attributes named in ``caches`` (dictionaries the object fills
@@ -307,7 +307,7 @@ def ship_once(cls: type, caches: Sequence[str] = ()) -> type:
 
     Parameters
     ----------
-    cls : type
+    shipped : type
         The class; its objects must not change after they are built (a cache aside).
     caches : sequence of str
         Instance attributes holding dictionaries that are caches.
@@ -315,7 +315,7 @@ def ship_once(cls: type, caches: Sequence[str] = ()) -> type:
     Returns
     -------
     type
-        ``cls`` (so that this can decorate a class).
+        ``shipped`` (so that this can decorate a class).
 
     Examples
     --------
@@ -325,8 +325,8 @@ def ship_once(cls: type, caches: Sequence[str] = ()) -> type:
     >>> ship_once(Table, caches=("_cache",)) is Table
     True
     """
-    _SHIPPED_ONCE[cls] = tuple(caches)
-    return cls
+    _SHIPPED_ONCE[shipped] = tuple(caches)
+    return shipped
 
 
 def _lean_copy(obj: Any) -> Any:
