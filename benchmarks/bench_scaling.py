@@ -11,16 +11,26 @@ Two sweeps: n_dof = 30 ... 300 with 27 unknowns (20 stiffness, 7 damping), and 2
 Reported: time per stage and in total, and the growth exponents b of t ~ x^b (least squares on log-log), written
 to ``benchmarks/results/scaling.json`` with a plot ``scaling.png``.
 
-``python -m benchmarks.bench_scaling dask``: the GSA stage of ``cappe identify`` on ``builtin:three-axis-machine-tool``
-(61 unknowns, Sobol' N = 16 as ``--n-gsa 16``, i.e. 16 x 63 model runs per position, at 2 of the grid's corners, 25
-modes, the four criteria) serially, then on a real local Dask cluster started here (``distributed.LocalCluster``:
-a scheduler and 1, then 2 worker processes of one thread each): the Sobol' indices must be identical, and the wall
-and CPU times give the scaling (``results/scaling_dask.json``). This host has 2 cores shared with other work: 2
-workers is its limit, and the load is recorded.
+``python -m benchmarks.bench_scaling dask [--workers 1,2,4,8] [--full] [--seed S]``: a whole ``cappe identify`` on
+``builtin:three-axis-machine-tool`` (61 unknowns, 25 modes per position, the reference from the independent scipy
+generator of :mod:`benchmarks.bench_three_axis` at a random truth), run as a command in a child process: serially
+(``--executor serial``), then with ``--scheduler`` on a real local Dask cluster started here
+(``distributed.LocalCluster``: a scheduler and 1, 2, ... worker processes of one thread each, every process on one
+BLAS thread). The result files must be identical except their timings, and so must the printed text and warnings.
+The GSA, the subproblems, the stiffness refinement's starts and the validations run on the cluster, the other steps
+in the command's process. Default settings keep one run to minutes on a shared 2-core host: 2 identification
+positions, ``--n-gsa 16 --n-opt 4 --permutations 2 --first-order``; ``--full`` takes bench_three_axis's (4
+positions, ``--n-gsa 64 --n-opt 10``, exact final refinement). On the first cluster, 200 trivial tasks that read the
+engine measure the cost per task (the first map ships the engine and its model, the second finds them on the
+workers). Reported (``results/scaling_dask.json``): wall and CPU seconds of the command and of the workers, the
+load, the stage times, and the parallel efficiency of the distributed stages against the smallest cluster,
+``t_1 w_1 / (t_w w)`` on their wall times: meaningful only on a machine with a free core per worker (this host has
+2 cores shared with other work: its load is recorded).
 """
 
 from __future__ import annotations
 
+import json
 import os
 import sys
 import time
@@ -95,50 +105,170 @@ def exponent(x: list[float], t: list[float]) -> float:
     return float(np.polyfit(np.log(x), np.log(t), 1)[0])
 
 
-def dask() -> None:
-    """The three-axis GSA stage serially and on a local Dask cluster of 1 and 2 workers: identical indices."""
+#: wall and CPU seconds (of the stages, of each subproblem): the only entries allowed to differ
+DASK_IGNORED = ("timings", "cpu_timings", "seconds")
+
+
+def _without_times(doc: Any) -> Any:
+    """``doc`` (a result file's JSON) without its timings."""
+    if isinstance(doc, dict):
+        return {k: _without_times(v) for k, v in doc.items() if k not in DASK_IGNORED}
+    if isinstance(doc, list):
+        return [_without_times(v) for v in doc]
+    return doc
+
+
+def _differences(a: Any, b: Any, path: str = "") -> list[str]:
+    """Where two JSON documents differ (their paths)."""
+    if isinstance(a, dict) and isinstance(b, dict):
+        out = [f"{path}/{k}: only in one" for k in sorted(set(a) ^ set(b))]
+        for k in sorted(set(a) & set(b)):
+            out += _differences(a[k], b[k], f"{path}/{k}")
+        return out
+    if isinstance(a, list) and isinstance(b, list) and len(a) == len(b):
+        return [d for k, (x, y) in enumerate(zip(a, b, strict=True)) for d in _differences(x, y, f"{path}[{k}]")]
+    return [] if a == b or (a != a and b != b) else [f"{path}: {a!r} != {b!r}"]
+
+
+def _identify_cli(args: list[str], out: Any) -> dict[str, Any]:
+    """``cappe identify ARGS -o OUT`` in a child process: its wall and CPU seconds, result file and text."""
+    import resource
+    import subprocess
+
+    load = os.getloadavg()[0]
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
+    wall = time.perf_counter()
+    done = subprocess.run([sys.executable, "-m", "cappe.cli", "identify", *args, "-o", str(out)], capture_output=True,
+                          text=True, check=False)
+    wall = time.perf_counter() - wall
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if done.returncode not in (0, 1):
+        msg = f"cappe identify failed (exit {done.returncode}):\n{done.stderr[-3000:]}"
+        raise SystemExit(msg)
+    text = [line for line in done.stdout.splitlines() if not line.startswith(("runtime:", "result (cappe."))]
+    return {"wall_s": wall, "cpu_s": (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime),
+            "load": load, "doc": json.loads(out.read_text()), "text": text,
+            "warnings": [line for line in done.stderr.splitlines() if line.startswith("cappe: warning:")]}
+
+
+def _task_overhead(address: str, engine: Any, n_tasks: int) -> dict[str, float]:
+    """Wall seconds per task of maps of trivial tasks that read the three-axis engine: the first map ships the engine
+    and its model; the second finds them on the workers."""
+    import cloudpickle
+
+    from cappe.parallel import Executor, shared_loads
+
+    items = [slice(k, k + 1) for k in range(n_tasks)]
+
+    def touch(s: slice) -> int:
+        return engine.model.n_dof + s.start
+
+    out: dict[str, float] = {"engine_bytes_with_caches": len(cloudpickle.dumps(engine)),
+                             "model_bytes": len(cloudpickle.dumps(engine.model))}
+    with Executor(address) as ex:
+        for label in ("first_map", "second_map"):
+            wall = time.perf_counter()
+            ex.map(touch, items)
+            out[f"{label}_s_per_task"] = (time.perf_counter() - wall) / n_tasks
+        out["loads_per_worker"] = max(sum(c.values()) for c in ex.client.run(shared_loads).values())
+    wall = time.perf_counter()
+    with Executor("serial") as ex:
+        ex.map(touch, items)
+    out["serial_s_per_task"] = (time.perf_counter() - wall) / n_tasks
+    return out
+
+
+def dask(argv: list[str]) -> None:
+    """A whole ``cappe identify`` on the three-axis machine, serially and on local Dask clusters (see the module)."""
+    import argparse
+    import tempfile
+    from pathlib import Path
+
     from distributed import Client, LocalCluster
 
+    from benchmarks.bench_three_axis import N_MODES, POSITIONS, VALIDATION, independent_reference
     from cappe.estimate import ParameterSpace
+    from cappe.io.modal import write_modal_data
+    from cappe.modal import ModalEngine
     from cappe.model import load_model
-    from cappe.sensitivity import model_sobol
 
-    nm = NumericModel(load_model("builtin:three-axis-machine-tool"))
-    space = ParameterSpace.from_model(nm)
-    truth = space.mapping(space.sample(1))
-    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
-    reference = reference_modes(nm, params=truth, positions=positions, n_modes=25)
-
-    def gsa(executor: str) -> tuple[Any, float, float, float]:
-        load = os.getloadavg()[0]
-        wall, cpu = time.perf_counter(), time.process_time()
-        result = model_sobol(nm, reference, n=16, rng=0, executor=executor)
-        return result, time.perf_counter() - wall, time.process_time() - cpu, load
-
-    serial, wall_s, cpu_s, load_s = gsa("serial")
-    rows: list[dict[str, Any]] = [{"executor": "serial", "workers": 1, "wall_s": wall_s, "client_cpu_s": cpu_s,
-                                   "load": load_s, "identical": True}]
-    print(f"serial: {wall_s:.1f} s wall ({cpu_s:.1f} s CPU), load {load_s:.1f}", flush=True)
-    for workers in (1, 2):
-        with (LocalCluster(n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
-              Client(cluster) as client):
-            before = client.run(time.process_time)
-            result, wall, cpu, load = gsa(cluster.scheduler_address)
-            after = client.run(time.process_time)
-        worker_cpu = sum(after[w] - before[w] for w in after)
-        same = all(np.array_equal(getattr(result.sobol, k), getattr(serial.sobol, k)) for k in ("S1", "ST"))
-        rows.append({"executor": "dask LocalCluster", "workers": workers, "wall_s": wall, "client_cpu_s": cpu,
-                     "worker_cpu_s": worker_cpu, "load": load, "identical": same, "speed_up_vs_serial": wall_s / wall})
-        print(f"dask, {workers} worker(s): {wall:.1f} s wall (client {cpu:.1f} s CPU, workers {worker_cpu:.1f} s "
-              f"CPU), load {load:.1f}; identical to serial: {same}", flush=True)
-    rows.append({"model": "three-axis-machine-tool", "stage": "GSA (model_sobol)", "n": 16, "unknowns": space.n,
-                 "positions": positions, "n_modes": 25, "model_runs": 16 * (space.n + 2) * len(positions)})
+    parser = argparse.ArgumentParser(prog="python -m benchmarks.bench_scaling dask")
+    parser.add_argument("--workers", default="1,2", help="worker processes of the clusters, e.g. 1,2,4,8 (default 1,2)")
+    parser.add_argument("--full", action="store_true",
+                        help="bench_three_axis's settings: 4 positions, --n-gsa 64 --n-opt 10, exact final refinement")
+    parser.add_argument("--seed", type=int, default=1, help="the truth's seed (default 1)")
+    opts = parser.parse_args(argv)
+    workers = [int(w) for w in opts.workers.split(",")]
+    positions = POSITIONS if opts.full else POSITIONS[:2]
+    settings = ["--n-gsa", "64", "--n-opt", "10"] if opts.full else [
+        "--n-gsa", "16", "--n-opt", "4", "--permutations", "2", "--first-order"]
+    # one BLAS thread in every process: the client, the CLI and the workers (they inherit it)
+    os.environ.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    machine = NumericModel(load_model("builtin:three-axis-machine-tool"))
+    space = ParameterSpace.from_model(machine)
+    rng = np.random.default_rng(opts.seed)
+    truth = space.mapping(space.lower * (space.upper / space.lower) ** rng.uniform(size=space.n))
+    rows: list[dict[str, Any]] = []
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp)
+        write_modal_data(folder / "reference.json", independent_reference(machine, truth, [*positions, VALIDATION]))
+        (folder / "truth.json").write_text(json.dumps(truth))
+        where = ",".join(f"{k}={v}" for k, v in VALIDATION.items())
+        args = ["builtin:three-axis-machine-tool", "--reference", str(folder / "reference.json"), "--truth",
+                str(folder / "truth.json"), "--validation", where, "--seed", "0", *settings]
+        serial = _identify_cli([*args, "--executor", "serial"], folder / "serial.json")
+        reference_doc = _without_times(serial["doc"])
+        diag = serial["doc"]["diagnostics"]
+        rows.append({"executor": "serial", "workers": 1, "wall_s": serial["wall_s"], "cpu_s": serial["cpu_s"],
+                     "warnings": len(serial["warnings"]),
+                     "load": serial["load"], "stages_s": diag["timings"], "stages_cpu_s": diag["cpu_timings"]})
+        print(f"serial: {serial['wall_s']:.1f} s wall, {serial['cpu_s']:.1f} s CPU, load {serial['load']:.1f}; "
+              f"stages (wall s): {', '.join(f'{k} {v:.1f}' for k, v in diag['timings'].items())}", flush=True)
+        for n in workers:
+            with (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+                  Client(cluster) as client):
+                address = cluster.scheduler_address
+                overhead = _task_overhead(address, ModalEngine(machine, sensors=None), 200) if n == workers[0] else None
+                cpu_before = client.run(time.process_time)
+                run = _identify_cli([*args, "--scheduler", address], folder / f"dask{n}.json")
+                cpu_after = client.run(time.process_time)
+            worker_cpu = sum(cpu_after[w] - cpu_before[w] for w in cpu_after)
+            diffs = _differences(_without_times(run["doc"]), reference_doc)
+            same_text = run["text"] == serial["text"] and run["warnings"] == serial["warnings"]
+            diag = run["doc"]["diagnostics"]
+            row = {"executor": "dask LocalCluster", "workers": n, "wall_s": run["wall_s"], "client_cpu_s": run["cpu_s"],
+                   "worker_cpu_s": worker_cpu, "load": run["load"], "identical": not diffs, "differences": diffs[:20],
+                   "identical_text": same_text, "warnings": len(run["warnings"]), "stages_s": diag["timings"],
+                   "stages_cpu_s": diag["cpu_timings"]}
+            if overhead is not None:
+                row["task_overhead"] = overhead
+                print(f"per task on {n} worker(s): {1e3 * overhead['first_map_s_per_task']:.2f} ms (first map, ships "
+                      f"the engine), {1e3 * overhead['second_map_s_per_task']:.2f} ms (second), serial "
+                      f"{1e3 * overhead['serial_s_per_task']:.3f} ms; loads per worker {overhead['loads_per_worker']}",
+                      flush=True)
+            rows.append(row)
+            print(f"dask, {n} worker(s): {run['wall_s']:.1f} s wall, CPU client {run['cpu_s']:.1f} s + workers "
+                  f"{worker_cpu:.1f} s, load {run['load']:.1f}; result file identical to serial: {not diffs} "
+                  f"{diffs[:3]}, text and warnings identical: {same_text}; stages (wall s): "
+                  f"{', '.join(f'{k} {v:.1f}' for k, v in diag['timings'].items())}", flush=True)
+    distributed_stages = ("gsa", "stiffness_subproblems", "stiffness_refinement", "validation")
+    base = next((r for r in rows if r.get("workers") == workers[0] and r["executor"] != "serial"), None)
+    for row in rows:
+        if row["executor"] != "serial" and base is not None:
+            t1 = sum(base["stages_s"][k] for k in distributed_stages)
+            tw = sum(row["stages_s"][k] for k in distributed_stages)
+            row["distributed_stages_wall_s"] = tw
+            row["parallel_efficiency_vs_first"] = t1 * base["workers"] / (tw * row["workers"])
+    rows.append({"model": "three-axis-machine-tool", "unknowns": space.n, "positions": positions,
+                 "validation": VALIDATION, "n_modes": N_MODES, "settings": settings, "truth_seed": opts.seed,
+                 "reference": "scipy eig of the state matrix (benchmarks.bench_three_axis.independent_reference)",
+                 "distributed_stages": distributed_stages, "blas_threads": 1, "threads_per_worker": 1})
     write_results("scaling_dask", rows)
 
 
 def main() -> None:
-    if sys.argv[1:] == ["dask"]:
-        dask()
+    if sys.argv[1:2] == ["dask"]:
+        dask(sys.argv[2:])
         return
     rows = []
     for n_bodies in (5, 10, 20, 30, 50):

@@ -24,7 +24,14 @@ from threadpoolctl import threadpool_info, threadpool_limits
 from cappe.estimate._automated import AutomatedIdentification
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, load_model
-from cappe.parallel import Executor, blas_threads, command_blas_threads, map_chunks, single_threaded_blas
+from cappe.parallel import (
+    Executor,
+    blas_threads,
+    command_blas_threads,
+    map_chunks,
+    shared_loads,
+    single_threaded_blas,
+)
 
 BENCH = Path(__file__).parent / "data" / "bench-slide.yaml"
 POSITIONS = [{"z": -0.2}, {"z": 0.0}, {"z": 0.3}]
@@ -36,6 +43,27 @@ def _square_chunk(offset: float):
         return [offset + k * k for k in range(s.start, s.stop)]
 
     return work
+
+
+def _warning_chunk(odd: str):
+    # a closure, shipped by value: warns on the odd chunks
+    def work(s: slice) -> int:
+        import warnings
+
+        if s.start % 2:
+            warnings.warn(f"chunk {s.start} {odd}", UserWarning, stacklevel=1)
+        return s.start
+
+    return work
+
+
+@pytest.mark.parametrize("kind", ["serial", "processes"])
+def test_warnings_raised_in_workers_reach_the_caller(kind):
+    # a worker process's warnings were lost: the user saw them on a serial run only
+    with Executor(kind, n_workers=2) as ex, pytest.warns(UserWarning, match="chunk") as caught:
+        out = ex.map(_warning_chunk("is odd"), [slice(k, k + 1) for k in range(5)])
+    assert out == [0, 1, 2, 3, 4]
+    assert [str(w.message) for w in caught] == ["chunk 1 is odd", "chunk 3 is odd"]
 
 
 @pytest.mark.parametrize("kind", ["serial", "threads", "processes"])
@@ -200,6 +228,32 @@ def test_dask_cluster_gives_the_serial_results(bench, reference, serial_run, das
     _same(_identify(bench, reference, dask_cluster), serial_run)
 
 
+@pytest.mark.slow
+def test_dask_ships_the_model_once_per_worker_not_per_task(bench, dask_cluster):
+    params = bench.nominal * np.random.default_rng(1).uniform(0.8, 1.2, size=(40, bench.nominal.size))
+    with Executor(dask_cluster) as ex:
+        before = ex.client.run(shared_loads)
+        engine = ModalEngine(bench, chunk_size=4, executor=ex)
+        batches = [engine.evaluate(params, position) for position in POSITIONS]  # 3 maps of 10 tasks
+        after = ex.client.run(shared_loads)
+    local = ModalEngine(bench, executor="serial")
+    for batch, position in zip(batches, POSITIONS, strict=True):
+        np.testing.assert_array_equal(batch.frequency, local.evaluate(params, position).frequency)
+    # per worker that ran tasks: the engine and its model, each unpickled once for the 30 tasks of the 3 maps
+    # (before: once per map for every worker, or once per task)
+    assert not any(before.values())  # the other tests' executors dropped theirs when they closed
+    assert any(after.values())
+    for counts in after.values():
+        assert sorted(counts.values()) in ([], [1, 1])
+    # a worker's warnings reach the caller, in item order
+    with Executor(dask_cluster) as ex, pytest.warns(UserWarning, match="chunk") as caught:
+        assert ex.map(_warning_chunk("on a worker"), [slice(k, k + 1) for k in range(4)]) == [0, 1, 2, 3]
+    assert [str(w.message) for w in caught] == ["chunk 1 on a worker", "chunk 3 on a worker"]
+    # closing the executor dropped the workers' copies
+    with Executor(dask_cluster) as ex:
+        assert not any(ex.client.run(shared_loads).values())
+
+
 @pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
 def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
     code = "from cappe.parallel import retain_freed_memory as r; print(r(), r())"
@@ -210,3 +264,44 @@ def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
         left = subprocess.run([sys.executable, "-c", code], env={**env, **extra}, capture_output=True, text=True,
                               check=True)
         assert left.stdout.split() == ["False", "False"], extra
+
+
+def _without_seconds(doc):
+    """A result document without its timings (the stages', each subproblem's)."""
+    if isinstance(doc, dict):
+        return {k: _without_seconds(v) for k, v in doc.items() if k not in ("timings", "cpu_timings", "seconds")}
+    if isinstance(doc, list):
+        return [_without_seconds(v) for v in doc]
+    return doc
+
+
+@pytest.mark.slow
+@pytest.mark.extended(reason=(
+    "a whole identification on the three-axis machine (61 unknowns, 162 DOF) on a LocalCluster; the same contract on "
+    "a smaller model: test_dask_cluster_gives_the_serial_results"))
+def test_three_axis_identification_on_a_local_cluster_equals_serial():
+    from distributed import LocalCluster
+
+    from cappe.estimate import ParameterSpace
+
+    machine = NumericModel(load_model("builtin:three-axis-machine-tool"))
+    space = ParameterSpace.from_model(machine)
+    truth = space.mapping(space.lower * (space.upper / space.lower) ** np.random.default_rng(3).uniform(size=space.n))
+    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
+    reference = ModalEngine(machine, n_modes=10).modal_data(positions, params=truth)
+
+    def identify(executor) -> AutomatedIdentification:
+        return AutomatedIdentification(machine, n_gsa=4, n_opt=2, rng=2, validation=positions[0], n_permutations=2,
+                                       exact=False, executor=executor).fit(reference)
+
+    serial = identify("serial")
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+        with Executor(cluster.scheduler_address) as ex:
+            remote = identify(ex)
+            loads = ex.client.run(shared_loads)
+    _same(remote, serial)
+    # the whole result file but its wall and CPU seconds (json: NaN equals NaN)
+    docs = [_without_seconds(run.result_.to_dict()) for run in (remote, serial)]
+    assert json.dumps(docs[0], sort_keys=True) == json.dumps(docs[1], sort_keys=True)
+    # the model and the engines of the GSA and the subproblems: each unpickled at most once per worker
+    assert all(set(counts.values()) <= {1} for counts in loads.values())

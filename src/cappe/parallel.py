@@ -16,6 +16,13 @@ so results do not depend on the chunk size, the number of workers or where the c
   function is scattered once to every worker, chunks run as tasks. ``dask-jobqueue`` (HPC batch systems) and
   ``dask-kubernetes`` clusters expose such an address too.
 
+On Dask, objects of the types registered with :func:`ship_once` (cappe's compiled models and modal engines) travel
+once per executor, not with every map: the function of a map is pickled with each such object replaced by a
+reference, the object itself (its caches left behind) is scattered to every worker the first time a map needs it,
+and each worker process unpickles it once and keeps it, with the caches it builds, until the executor closes. The
+GSA of the three-axis machine maps once per position and chunk of samples, so its model and engine (2 MB, and 30 MB
+more of caches per position) would otherwise be pickled, sent and unpickled a hundred times per worker.
+
 Commands (``cappe ...``) run their whole work under :func:`command_blas_threads`: one BLAS thread unless the
 environment variable ``CAPPE_BLAS_THREADS`` says otherwise (a number of threads, or ``auto`` for the BLAS
 library's own choice). Their work is many small linear-algebra calls, which OpenBLAS's threads only slow down.
@@ -26,9 +33,14 @@ The first map also tunes glibc's allocator of this process to keep freed memory 
 
 from __future__ import annotations
 
+import io
 import os
+import pickle
 import sys
 import threading
+import uuid
+import warnings
+from collections import Counter, OrderedDict
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, ThreadPoolExecutor, as_completed
 from contextlib import contextmanager
@@ -45,6 +57,8 @@ __all__ = [
     "map_chunks",
     "resolve_workers",
     "retain_freed_memory",
+    "shared_loads",
+    "ship_once",
     "single_threaded_blas",
 ]
 
@@ -280,6 +294,142 @@ def retain_freed_memory() -> bool:
     return _ALLOCATOR_TUNED
 
 
+#: The types whose objects a Dask map ships once per executor, with the attributes left behind (caches).
+_SHIPPED_ONCE: dict[type, tuple[str, ...]] = {}
+
+
+def ship_once(shipped: type, caches: Sequence[str] = ()) -> type:
+    """Register the class ``shipped``: on a Dask executor its objects travel to each worker once, not with every map.
+
+    For immutable objects that many maps read (a compiled model, a modal engine): the worker keeps its copy,
+    unpickled once, until the executor closes. The attributes named in ``caches`` (dictionaries the object fills
+    as it computes) are sent empty; the worker's copy fills its own.
+
+    Parameters
+    ----------
+    shipped : type
+        The class; its objects must not change after they are built (a cache aside).
+    caches : sequence of str
+        Instance attributes holding dictionaries that are caches.
+
+    Returns
+    -------
+    type
+        ``shipped`` (so that this can decorate a class).
+
+    Examples
+    --------
+    >>> class Table:
+    ...     def __init__(self):
+    ...         self.values, self._cache = [1.0, 2.0], {}
+    >>> ship_once(Table, caches=("_cache",)) is Table
+    True
+    """
+    _SHIPPED_ONCE[shipped] = tuple(caches)
+    return shipped
+
+
+def _lean_copy(obj: Any) -> Any:
+    """A shallow copy of a registered object with its caches emptied (what is sent)."""
+    caches = next(names for cls, names in _SHIPPED_ONCE.items() if isinstance(obj, cls))
+    if not caches or not hasattr(obj, "__dict__"):
+        return obj
+    clone = object.__new__(type(obj))
+    state = dict(vars(obj))
+    for name in caches:
+        if isinstance(state.get(name), dict):
+            state[name] = type(state[name])()
+    clone.__dict__.update(state)
+    return clone
+
+
+class _SharingPickler:
+    """cloudpickle with the registered objects (other than ``root``) written as references: ``share(obj)`` gives
+    the reference and makes sure the object travels itself."""
+
+    def __init__(self, share: Callable[[Any], str]) -> None:
+        self.share = share
+
+    def dumps(self, obj: Any, root: Any = None) -> bytes:
+        import cloudpickle
+
+        share = self.share
+        registered = tuple(_SHIPPED_ONCE)
+
+        class Pickler(cloudpickle.Pickler):  # type: ignore[misc]
+            def persistent_id(self, value: Any) -> str | None:
+                if registered and isinstance(value, registered) and value is not root:
+                    return share(value)
+                return None
+
+        buffer = io.BytesIO()
+        Pickler(buffer, protocol=pickle.HIGHEST_PROTOCOL).dump(obj)
+        return buffer.getvalue()
+
+
+# -- the worker's side of a Dask map: the objects shipped once, and the function of each recent map -------------
+_WORKER_LOCK = threading.Lock()
+_WORKER_SHARED: dict[str, Any] = {}
+_WORKER_FUNCTIONS: OrderedDict[str, Callable[[Any], Any]] = OrderedDict()
+_WORKER_FUNCTIONS_KEPT = 4
+_SHARED_LOADS: Counter[str] = Counter()
+
+
+class _SharedUnpickler(pickle.Unpickler):
+    """Resolves the references of :class:`_SharingPickler` from this process's copies, unpickling a copy the first
+    time from ``payloads`` (the scattered objects)."""
+
+    def __init__(self, data: bytes, payloads: Mapping[str, bytes]) -> None:
+        super().__init__(io.BytesIO(data))
+        self.payloads = payloads
+
+    def persistent_load(self, pid: Any) -> Any:
+        token = str(pid)
+        if token not in _WORKER_SHARED:
+            _WORKER_SHARED[token] = _SharedUnpickler(self.payloads[token], self.payloads).load()
+            _SHARED_LOADS[token] += 1
+        return _WORKER_SHARED[token]
+
+
+def _run_shared(item: Any, function: bytes, map_key: str, payloads: Mapping[str, bytes]) -> Any:
+    """A Dask task: the map's function (unpickled once per process and map) applied to ``item``."""
+    with _WORKER_LOCK:
+        func = _WORKER_FUNCTIONS.get(map_key)
+        if func is None:
+            func = _SharedUnpickler(function, payloads).load()
+            _WORKER_FUNCTIONS[map_key] = func
+            while len(_WORKER_FUNCTIONS) > _WORKER_FUNCTIONS_KEPT:
+                _WORKER_FUNCTIONS.popitem(last=False)
+    return func(item)
+
+
+def _forget_shared(tokens: Sequence[str]) -> int:
+    """Drop this process's copies of the shipped objects ``tokens`` and the functions of past maps."""
+    with _WORKER_LOCK:
+        _WORKER_FUNCTIONS.clear()
+        return sum(_WORKER_SHARED.pop(token, None) is not None for token in tokens)
+
+
+def shared_loads() -> dict[str, int]:
+    """The objects shipped once (see :func:`ship_once`) that this process holds, by reference, and how often it
+    unpickled each.
+
+    A diagnostic for Dask workers (``client.run(shared_loads)``): every count is 1 when each object travelled once;
+    a closed executor's objects are gone.
+
+    Returns
+    -------
+    dict of str to int
+
+    Examples
+    --------
+    >>> isinstance(shared_loads(), dict)
+    True
+    """
+    with _WORKER_LOCK:
+        return {token: _SHARED_LOADS[token] for token in _WORKER_SHARED}
+
+
 class Executor:
     """Where :func:`map_chunks` runs its chunks (see the module): serial, threads, processes or Dask.
 
@@ -312,6 +462,9 @@ class Executor:
         self.kind = kind
         self.n_workers = 1 if kind == "serial" else resolve_workers(n_workers)
         self._client: Any = None
+        # the objects shipped once (ship_once): id -> (reference, the object, its scattered payload, the references
+        # its payload holds); the object is kept so that its id is not reused while the workers hold its copy
+        self._shipped: dict[int, tuple[str, Any, Any, tuple[str, ...]]] = {}
 
     @classmethod
     def coerce(cls, executor: Executor | str | None, n_workers: int | None = None) -> Executor:
@@ -337,7 +490,7 @@ class Executor:
 
     def __getstate__(self) -> dict[str, Any]:
         # shipped along with the objects that hold it (a modal engine, say): the client stays here
-        return {**self.__dict__, "_client": None}
+        return {**self.__dict__, "_client": None, "_shipped": {}}
 
     def __enter__(self) -> Executor:
         return self
@@ -346,8 +499,16 @@ class Executor:
         self.close()
 
     def close(self) -> None:
-        """Release the Dask client, if one was opened."""
+        """Release the Dask client, if one was opened, and the workers' copies of the objects shipped once."""
         if self._client is not None:
+            if self._shipped:
+                tokens = [token for token, *_ in self._shipped.values()]
+                try:
+                    self._client.run(_forget_shared, tokens)
+                except OSError:  # pragma: no cover - the cluster is gone; so are its copies
+                    pass
+                self._client.cancel([future for _, _, future, _ in self._shipped.values()])
+            self._shipped.clear()
             self._client.close()
             self._client = None
 
@@ -410,20 +571,59 @@ class Executor:
                 local = {processes.submit(_run_installed, item): k for k, item in enumerate(items)}
                 return _collect(as_completed(local), local, items, done)
         client = self.client
-        remote = client.scatter(call, broadcast=True)
-        tasks = client.map(_run_scattered, items, function=remote, pure=False)
-        return _collect(tasks, {f: k for k, f in enumerate(tasks)}, items, done)  # waits in item order
+        used: set[str] = set()
+        function = _SharingPickler(lambda obj: self._ship(obj, used)).dumps(call)
+        key = f"cappe-map-{uuid.uuid4().hex}"
+        remote = client.scatter(function, broadcast=True, hash=False)
+        needed = {token: future for token, _, future, _ in self._shipped.values() if token in self._closure(used)}
+        tasks = client.map(_run_shared, items, function=remote, map_key=key, payloads=needed, pure=False)
+        try:
+            return _collect(tasks, {f: k for k, f in enumerate(tasks)}, items, done)  # waits in item order
+        finally:
+            client.cancel([remote])
+
+    def _ship(self, obj: Any, used: set[str]) -> str:
+        """The reference of a registered object in a Dask map's function; scattered to the workers the first
+        time (its own registered parts shipped as references too)."""
+        entry = self._shipped.get(id(obj))
+        if entry is None:
+            inner: set[str] = set()
+            lean = _lean_copy(obj)
+            payload = _SharingPickler(lambda part: self._ship(part, inner)).dumps(lean, root=lean)
+            token = f"cappe-shared-{uuid.uuid4().hex}"
+            future = self.client.scatter(payload, broadcast=True, hash=False)
+            entry = (token, obj, future, tuple(sorted(inner)))
+            self._shipped[id(obj)] = entry
+        used.add(entry[0])
+        return entry[0]
+
+    def _closure(self, tokens: set[str]) -> set[str]:
+        """``tokens`` and the references their payloads hold, recursively."""
+        inner = {token: deps for token, _, _, deps in self._shipped.values()}
+        out: set[str] = set()
+        todo = list(tokens)
+        while todo:
+            token = todo.pop()
+            if token not in out:
+                out.add(token)
+                todo.extend(inner.get(token, ()))
+        return out
 
 
 class _Pinned:
-    """A callable that runs ``func`` with BLAS on one thread (in whatever process it lands)."""
+    """A callable that runs ``func`` with BLAS on one thread (in whatever process it lands) and hands back its
+    value with the warnings it raised (``(category, message)`` pairs), which the calling process raises again:
+    a worker's warnings reach the user as a serial run's do. ``catch_warnings`` is process-wide state, so with
+    several threads per Dask worker a warning may be attributed to another task of that worker (not lost)."""
 
     def __init__(self, func: Callable[[Any], Any]) -> None:
         self.func = func
 
-    def __call__(self, item: Any) -> Any:
-        with single_threaded_blas():
-            return self.func(item)
+    def __call__(self, item: Any) -> tuple[Any, list[tuple[type[Warning], str]]]:
+        with single_threaded_blas(), warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            value = self.func(item)
+        return value, [(w.category, str(w.message)) for w in caught]
 
 
 _INSTALLED: Callable[[Any], Any] | None = None
@@ -442,18 +642,18 @@ def _run_installed(item: Any) -> Any:
     return _INSTALLED(item)
 
 
-def _run_scattered(item: Any, function: Callable[[Any], Any]) -> Any:
-    return function(item)
-
-
 def _collect(finished: Any, index: dict[Any, int], items: list[Any], done: Callable[[Any], None] | None) -> list[Any]:
     """Results of ``finished`` futures (in completion order) put back in item order."""
     out: list[Any] = [None] * len(items)
+    raised: list[list[tuple[type[Warning], str]]] = [[] for _ in items]
     for future in finished:
         k = index[future]
-        out[k] = future.result()
+        out[k], raised[k] = future.result()
         if done is not None:
             done(items[k])
+    for caught in raised:  # the workers' warnings, in item order (not the order the items finished in)
+        for category, message in caught:
+            warnings.warn(message, category, stacklevel=3)
     return out
 
 

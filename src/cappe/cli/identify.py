@@ -80,9 +80,11 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
     p.add_argument("--seed", type=int, default=0, help="random seed (default 0)")
     p.add_argument("--workers", type=int, help="threads or processes (default: one per core)")
     p.add_argument("--executor", choices=("serial", "threads", "processes"), default="threads",
-                   help="where the GSA and the subproblems run (default threads; the result is the same)")
+                   help="where the GSA, the subproblems and the validations run (default threads; the result is "
+                        "the same)")
     p.add_argument("--scheduler", metavar="tcp://HOST:PORT",
-                   help="run the GSA and the subproblems on an existing Dask cluster (overrides --executor)")
+                   help="run the GSA, the subproblems and the validations on an existing Dask cluster (overrides "
+                        "--executor; the result is the same)")
     p.add_argument("--progress", action="store_true", help="progress bars even when stderr is not a terminal")
     p.add_argument("--report", metavar="FILE.html", help="write a self-contained HTML report")
     add_output_options(p)

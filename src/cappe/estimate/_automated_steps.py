@@ -253,14 +253,19 @@ def stiffness_refinement_step(setup: Setup, ident_ref: ModalData, search: Stiffn
     selected = search.values
     candidates = _alternative_starts(list(search.subproblems), space, selected, modal_names, settings.refine_starts)
     w_f, _, w_s = settings.weights
-    # independent local refinements: side by side on a thread executor (numpy's solves release the GIL); their
-    # warnings are recorded here, around all of them (catch_warnings is process-wide state)
-    local = setup.runner if setup.runner.kind == "threads" else Executor("serial")
+    # independent local refinements: side by side on the executor (threads: numpy's solves release the GIL; worker
+    # processes and Dask workers hand back their warnings); the warnings are recorded here, around all of them
+    # (catch_warnings is process-wide state). A remote start's cost function stays where it ran (unused here)
+    remote = setup.runner.kind not in ("serial", "threads")
+
+    def refine(candidate: tuple[str, Array]) -> _LocalRefinement:
+        found = _modal_refinement(setup, ident_ref, candidate[1], modal_names, (w_f, 0.0, w_s))
+        return replace(found, cost_function=None) if remote else found
+
     bar = setup.bar(len(candidates), "stiffness refinement", "start")
     with _recorded_warnings(caught, sort=True):  # the starts' threads interleave their warnings
         try:
-            refined = local.map(lambda c: _modal_refinement(setup, ident_ref, c[1], modal_names, (w_f, 0.0, w_s)),
-                                candidates, done=lambda _: bar.update(1))
+            refined = setup.runner.map(refine, candidates, done=lambda _: bar.update(1))
         finally:
             bar.close()
     runs = tuple(RefinementRun(label, found.cost_before, float(found.estimate.cost))

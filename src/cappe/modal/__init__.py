@@ -10,6 +10,11 @@ from cappe.modal._derivatives import (
 )
 from cappe.modal._engine import ModalEngine, ModeReference, modal_batch
 from cappe.modal._reference import axis_positions, reference_frf, reference_modes, sensor_coordinates
+from cappe.parallel import ship_once
+
+# a Dask executor sends an engine to each worker once, not with every map (its per-position caches stay here)
+ship_once(ModalEngine, caches=("_sensor_cache", "_group_cache", "_nominal_cache", "_stacked_cache", "_fused_cache",
+                               "_state_cache"))
 
 __all__ = [
     "ExactModeDerivatives",

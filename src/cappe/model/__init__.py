@@ -18,6 +18,11 @@ from cappe.model.structure import (
     StructureBuilder,
 )
 from cappe.model.symbolic import SymbolicModel, derive
+from cappe.parallel import ship_once
+
+# a Dask executor sends a compiled model to each worker once, not with every map (its caches stay here)
+ship_once(NumericModel, caches=("_pattern_cache", "_source_row_cache", "_sensor_matrix_cache", "_sparse_cache",
+                                "_safe_coefficient"))
 
 __all__ = [
     "FORMAT",
