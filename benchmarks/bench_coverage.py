@@ -24,7 +24,9 @@ one-step,ekf --simulators daq --noises 0.01,0.05 --inputs 1 --seeds 10 --out cov
 5 % noise; the delayed record at 16x) with step 1 fitted to the band-limited input, and on ``lsim`` records (1 %)
 with the second step weighted by step 1's covariance (the default) and unweighted (``weighting="none"``, the method
 before issue 21). ``CAPPE_BENCH_TWO_STEP=f1f2``: the same three methods with F1 + F2 on the three simulators, 1 %
-and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP_CASES=3,4,5`` runs those cases only (indices into
+and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP=errors``: one-step and two-step-tf side by side on
+the ten 64x records, every error with its standard error (``coverage_two_step_error_scale.json``).
+``CAPPE_BENCH_TWO_STEP_CASES=3,4,5`` runs those cases only (indices into
 the mode's list, results in ``..._part3.json``: parallel processes). Per row also the coverage of the fits that
 claim success, the median and worst error per parameter, how many fits passed the second step's chi-square test,
 and CPU seconds.
@@ -182,6 +184,31 @@ def run_two_step(seeds: range, inputs: int = 1,
               f"{passed}/{len(seeds)}  success {successes}/{len(seeds)}  {row['cpu_seconds']:6.1f} s CPU", flush=True)
         if out is not None:
             write_results(out, rows)
+    return rows
+
+
+def run_error_scale(seeds: range, over: int = 64) -> list[dict[str, Any]]:
+    """Per seed, one-step and two-step-tf on the same DAQ record (F1, 1 %, ``over``): every parameter's relative
+    error and relative standard error, and the second step's chi-square test (``CAPPE_BENCH_TWO_STEP=errors``):
+    is the two-step's larger error a bias, or the scale its own standard errors state?"""
+    nm = NumericModel(load_model("builtin:two-mass-rig"))
+    rows: list[dict[str, Any]] = []
+    for seed in seeds:
+        data = record("daq", 0.01, seed, 1, over).select(["F1", "d1", "d2"])
+        row: dict[str, Any] = {"seed": seed, "oversample": over}
+        for method in ("one-step", "two-step-tf"):
+            with warnings.catch_warnings():
+                warnings.simplefilter("ignore")
+                est = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
+                                              **settings(method, "daq", 1)).fit(data).estimate_
+            row[method] = {n: [est.values[k] / TRUTH[n] - 1, est.std[k] / TRUTH[n]] for k, n in enumerate(est.names)}
+            if method == "two-step-tf":
+                row["chi2"] = est.diagnostics.get("second_step_test")
+        rows.append(row)
+        one, two = row["one-step"]["c22"], row["two-step-tf"]["c22"]
+        print(f"seed {seed}: c22 one-step {100 * one[0]:+.3f} % (std {100 * one[1]:.3f} %)  two-step "
+              f"{100 * two[0]:+.3f} % (std {100 * two[1]:.3f} %)", flush=True)
+        write_results("coverage_two_step_error_scale", rows)
     return rows
 
 
@@ -352,6 +379,9 @@ def _main(args: argparse.Namespace) -> None:
         write_results("coverage_short_level", run_short_level(args.short_level))
         return
     two_step = os.environ.get("CAPPE_BENCH_TWO_STEP")
+    if two_step == "errors":
+        run_error_scale(range(10))
+        return
     if two_step:  # CAPPE_BENCH_TWO_STEP_CASES=3,4,5: a part of the cases (indices), to run in parallel processes
         inputs, cases, name = ((2, TWO_STEP_BOTH_INPUTS, "coverage_two_step_f1f2") if two_step == "f1f2" else
                                (1, TWO_STEP_CASES, "coverage_two_step"))
