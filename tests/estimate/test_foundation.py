@@ -93,6 +93,24 @@ def test_only_the_sum_of_two_masses_is_determined():
     assert unc.combinations == ("+0.83 m2 -0.55 m1",)
 
 
+def test_column_scale_keeps_a_determined_parameter_near_zero_determined():
+    """An offset that happens to lie near 0 is determined as well as any other: relative scaling (the default,
+    for physical parameters) shrinks its column to a false null direction; ``scale`` (unit-norm columns, as step 1
+    of the two-step method gives) does not, and the covariance is then the textbook one."""
+    x = np.linspace(0.0, 1.0, 40)
+    design = np.column_stack([x, np.ones_like(x)])
+    values = np.array([2.0, 1e-9])
+    r = 0.01 * np.cos(7 * x)
+    relative = jacobian_uncertainty(names=["a", "offset"], values=values, jacobian=design, residuals=r)
+    assert relative.identifiable.tolist() == [True, False]
+    unit = jacobian_uncertainty(names=["a", "offset"], values=values, jacobian=design, residuals=r,
+                                scale=1.0 / np.sqrt(np.sum(design**2, axis=0)))
+    assert unit.identifiable.all()
+    np.testing.assert_allclose(unit.covariance, r @ r / 38 * np.linalg.inv(design.T @ design), rtol=1e-10)
+    with pytest.raises(ValueError, match="scale must hold 2 finite positive"):
+        jacobian_uncertainty(names=["a", "offset"], values=values, jacobian=design, residuals=r, scale=[1.0, 0.0])
+
+
 def test_least_squares_recovers_stiffnesses_from_frequencies(two_mass):
     nm = NumericModel(two_mass)
     truth = {"k11": 1.1e6, "k22": 0.3e6}

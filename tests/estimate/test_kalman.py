@@ -306,6 +306,14 @@ def test_ukf_converges_on_the_seven_parameter_rig(rig):
     assert np.all(np.abs(est.values - np.array(list(TRUTH.values()))) < 5 * est.std)
     estimated = np.array(list(est.diagnostics["noise"].values()))
     np.testing.assert_allclose(estimated, 0.01, rtol=0.1)  # the 1 % noise recovered within 10 %
+    # two passes (the default where the output-error refinement finishes the job; the old default ran up to 6 at
+    # ~2 CPU-s a pass on 6000 samples), then Gauss-Newton steps to the output-error optimum
+    assert est.diagnostics["passes"] <= 2
+    assert est.diagnostics["output_error_refinement"]["converged"]
+    # where nothing refines the filter's estimate, it keeps its passes
+    unrefined = UnscentedKalmanEstimator(rig, list(TRUTH), refine=False)
+    assert unrefined._passes(constant=True) == 6
+    assert UnscentedKalmanEstimator(rig)._passes(constant=False) == 6
 
 
 def test_tracks_a_stiffness_stepping_down_by_20_percent(rig):

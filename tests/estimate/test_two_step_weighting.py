@@ -229,3 +229,29 @@ def test_band_limited_step_one_without_complex_poles_falls_back_and_says_so(two_
     assert any(str(w.message).startswith(said) for w in caught)
     assert any(line.startswith(said) and "real or unstable poles" in line for line in est.diagnostics["warnings"])
     assert est.diagnostics["identification"].startswith("oe (time data), the first-order hold standing in")
+
+
+def test_band_limited_step_one_with_an_undetermined_combination_refuses_the_weighting(two_mass):
+    """F2 a copy of F1 (up to 1e-9 of its RMS): step 1 determines only the sum of the two inputs' residues and
+    feed-throughs. Its covariance now comes from :func:`jacobian_uncertainty`, which flags the null directions; the
+    second step is not weighted by it and the text's weighting line names the undetermined combinations. On the old
+    code a pseudo-inverse gave those directions zero variance: the second step was weighted as if they were known
+    exactly (and its chi-square test failed with every estimate at a bound). Either way no parameter may be claimed
+    with an interval that misses the truth."""
+    from cappe.systems import TimeData
+
+    rng = np.random.default_rng(0)
+    f, y = _daq(TRUTH, rng, over=16)
+    one = _record(f, y, 0.01, rng)
+    f1 = one.channel("F1")
+    data = TimeData.from_rate(FS, {"F1": f1, "F2": f1 + 1e-9 * np.std(f1) * rng.standard_normal(f1.size),
+                                   "d1": one.channel("d1"), "d2": one.channel("d2")})
+    est = _fit(two_mass, TwoStepTFEstimator, data, intersample="bl", n_starts=2)
+    said = est.diagnostics["second_step_weighting"]
+    assert said.startswith("none (normalized-square index): d1: the band-limited step 1 does not determine"), said
+    assert "F1:D -0.70 F2:D" in said or "F2:D -0.70 F1:D" in said, said
+    assert "second_step_test" not in est.diagnostics
+    truth = np.array([TRUTH[n] for n in est.names])
+    lo, hi = est.ci95.T
+    claimed = est.identifiable  # "identifiable: yes" in the text
+    assert np.all(((lo <= truth) & (truth <= hi)) | ~claimed), dict(zip(est.names, est.ci95.tolist(), strict=True))

@@ -116,6 +116,12 @@ _X0_SAMPLES = 2000
 #: Most Gauss-Newton steps of the output-error refinement after the filter's passes (a UKF record at 5 % noise
 #: needed 10, with 23 halvings, from a filter estimate 7 % off; 8 left it 3.8 std off and unconverged).
 _REFINE_STEPS = 20
+#: Most filter passes where nothing refines their estimate (tracking, ``refine=False``).
+_PASSES = 6
+#: The UKF's passes before the output-error refinement, which reaches the same optimum from a rougher start: on the
+#: two-mass rig (F1, lsim, 10 seeds) 2 passes and the refinement gave the 6 passes' coverage and accuracy at 5.6
+#: instead of 15.7 CPU-s (1 % noise) and 12.1 instead of 17.1 (5 %; benchmarks/results/coverage_ukf_passes.json).
+_REFINED_PASSES = 2
 #: Measurement noise (fraction of each output's RMS) of the first pass when none is given.
 _FIRST_NOISE = 0.05
 #: Why the filters refuse a band-limited input (module notes).
@@ -548,7 +554,7 @@ class _KalmanEstimator(Estimator):
         noise: float | Mapping[str, float] | None = None,
         process_noise: float = 0.0,
         random_walk: float | Mapping[str, float] = 0.0,
-        passes: int = 6,
+        passes: int | None = 6,
         tol: float = 1e-4,
         initial_state: str = "estimate",
         inflation: float = 4.0,
@@ -578,7 +584,8 @@ class _KalmanEstimator(Estimator):
         if check_intersample(self.intersample) == "bl":
             msg = f"intersample 'bl' does not apply to the {self._kind} Kalman filter: {BAND_LIMITED_REFUSAL}"
             raise DataError(msg)
-        if isinstance(self.passes, bool) or not isinstance(self.passes, int) or self.passes < 1:
+        if self.passes is not None and (isinstance(self.passes, bool) or not isinstance(self.passes, int)
+                                        or self.passes < 1):
             msg = f"passes must be an integer >= 1; got {self.passes!r}"
             raise DataError(msg)
         for what, value in (("process_noise", self.process_noise), ("tol", self.tol)):
@@ -623,6 +630,7 @@ class _KalmanEstimator(Estimator):
         p_x = np.eye(n_x) if self.initial_state == "estimate" else _REST_VAR * np.eye(n_x)
         p_first = p_x
         constant = not (self.process_noise > 0 or np.any(walk > 0))
+        n_passes = self._passes(constant)
         passes: list[_Pass] = []
         history: list[dict[str, float]] = []
         change = np.full(nt, np.inf)
@@ -632,7 +640,7 @@ class _KalmanEstimator(Estimator):
         info = np.zeros((nt, nt))
         newton = np.full(nt, np.nan)
         errors: tuple[Array, Array, Array] | None = None
-        for k in range(self.passes):
+        for k in range(n_passes):
             p0 = np.zeros((nt + n_x, nt + n_x))
             p0[:nt, :nt] = p_theta
             p0[nt:, nt:] = p_x
@@ -692,6 +700,13 @@ class _KalmanEstimator(Estimator):
                                      "gauss_newton_std": dict(zip(space.names, tested.std.tolist(), strict=True))}
         return with_residual_tests(replace(estimate, diagnostics=diagnostics), [output_errors], [record.w],
                                    record.outputs, record.inputs)
+
+    def _passes(self, constant: bool) -> int:
+        """The most filter passes: ``passes``, or where it is None (the UKF's default) :data:`_REFINED_PASSES` when
+        the output-error refinement finishes the job (constant parameters, ``refine``) and :data:`_PASSES` else."""
+        if self.passes is not None:
+            return int(self.passes)
+        return _REFINED_PASSES if constant and self.refine else _PASSES
 
     @staticmethod
     def _uncertainty(
@@ -862,7 +877,7 @@ class _KalmanEstimator(Estimator):
         band = [float(stats.chi2.ppf(0.025, n_used * m) / n_used), float(stats.chi2.ppf(0.975, n_used * m) / n_used)]
         per_channel = np.mean(last.innovations[skip:] ** 2 / (last.predicted_var[skip:] + r_std**2), axis=0)
         largest = float(np.max(change)) if change.size else 0.0
-        single = len(passes) == 1 and self.passes == 1 and refinement is None
+        single = len(passes) == 1 and self._passes(constant) == 1 and refinement is None
         refined = refinement is not None and bool(refinement["converged"])
         success = finite and (converged or single or refined)
         if not finite:
@@ -1183,8 +1198,12 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
     ----------
     model, unknowns, bounds, start, values, rng
         See :class:`Estimator`.
-    inputs, outputs, position, noise, process_noise, random_walk, passes, tol, initial_state, inflation
+    inputs, outputs, position, noise, process_noise, random_walk, tol, initial_state, inflation
         As for :class:`ExtendedKalmanEstimator`.
+    passes : int, optional
+        Maximum number of forward passes over the record. Default: 2 where the output-error refinement finishes
+        the job (constant parameters, ``refine``; a UKF pass costs ~2 CPU-s on 6000 samples of the two-mass rig,
+        and 2 passes gave the same coverage and accuracy as 6), else 6.
     intersample, covariance, refine
         As for :class:`ExtendedKalmanEstimator`.
     alpha : float
@@ -1224,7 +1243,7 @@ class UnscentedKalmanEstimator(_KalmanEstimator):
         noise: float | Mapping[str, float] | None = None,
         process_noise: float = 0.0,
         random_walk: float | Mapping[str, float] = 0.0,
-        passes: int = 6,
+        passes: int | None = None,
         tol: float = 1e-4,
         initial_state: str = "estimate",
         inflation: float = 4.0,

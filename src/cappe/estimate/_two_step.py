@@ -123,6 +123,7 @@ from cappe.estimate._base import (
     with_residual_tests,
 )
 from cappe.estimate._space import ParameterSpace
+from cappe.estimate._uncertainty import jacobian_uncertainty
 from cappe.exceptions import DataError, IllConditionedWarning, ModelError
 from cappe.model import NumericModel, Structure
 from cappe.systems.frf import FRFData
@@ -532,8 +533,8 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
                         tfs[f"{name}->{output}"] = TransferFunctionModel(
                             tuple(float(c) for c in block[: n + 1][::-1]),
                             (1.0, *(float(c) for c in block[n + 1:][::-1])), name, output)
-                    propagated[output] = _linearized(partial(bl.coefficients, inputs=names), bl.parameters_,
-                                                     bl.covariance_)
+                    propagated[output] = (bl.no_covariance if bl.covariance_ is None else _linearized(
+                        partial(bl.coefficients, inputs=names), bl.parameters_, bl.covariance_))
                     continue
                 fallback.append(f"{output}: {bl}")
             errors[output] = oe.residuals(data) / max(float(np.sqrt(np.mean((y - y.mean()) ** 2))), 1e-300)
@@ -665,8 +666,9 @@ class _BandLimitedOE:
     dt: float
     scale: float
     parameters_: Array
-    covariance_: Array
+    covariance_: Array | None  # None where the record does not determine every parameter (``no_covariance``)
     errors: Array  # output errors divided by ``scale`` (n_samples,)
+    no_covariance: str = ""
 
     def coefficients(self, theta: Array, inputs: Sequence[str]) -> Array:
         """Per input of ``inputs``: the numerator (``2 n_modes + 1``) and the monic denominator below its leading 1,
@@ -717,7 +719,8 @@ def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start:
     """Step 1 for a band-limited input: :class:`_BandLimitedOE` by separable least squares (the linear parameters
     solved at every poles-and-delay vector, which scipy's trust region searches from ``start``: the poles of the
     first-order-hold stand-in, ~1 % off), with its Gauss-Newton covariance ``s^2 (J^T J)^-1`` over every parameter
-    (the Jacobian of the poles and delay by central differences). Returns why not where the start has no complex
+    (:func:`jacobian_uncertainty`; the Jacobian of the poles by central differences); no covariance, and why, where
+    the record leaves a combination of the parameters undetermined. Returns why not where the start has no complex
     pole pairs."""
     from scipy.optimize import least_squares
 
@@ -760,14 +763,28 @@ def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start:
         step[j] = h
         jac_nl[:, j] = (_bl_basis(u_in, u_nl + step, dt) @ c - _bl_basis(u_in, u_nl - step, dt) @ c) / (2 * h)
     jac = np.hstack([jac_nl, phi])
-    dof = yn.size - jac.shape[1]
-    sigma2 = float(errors @ errors) / max(dof, 1)
     norm = np.sqrt(np.sum(jac**2, axis=0))
     norm[norm == 0] = 1.0
-    cov = sigma2 * np.linalg.pinv((jac / norm).T @ (jac / norm)) / np.outer(norm, norm)
-    if not np.all(np.isfinite(cov)):
-        return "the band-limited step 1's covariance is not finite (its parameters are not all identifiable)"
-    return _BandLimitedOE(tuple(inputs), m, dt, scale, np.concatenate([u_nl, c]), cov, errors)
+    theta = np.concatenate([u_nl, c])
+    # the one home of the Gauss-Newton covariance, with unit-norm columns for the rank decision: the linear
+    # parameters (residues, offset, initial state) may lie near 0, where relative scaling would invent a null space
+    unc = jacobian_uncertainty(names=_bl_names(inputs, m), values=theta, jacobian=jac, residuals=errors,
+                               scale=1.0 / norm)
+    if not np.all(unc.identifiable) or not np.all(np.isfinite(unc.covariance)):
+        # a pseudo-inverse would give the undetermined direction no variance, and the weighted second step would
+        # read it as known exactly: the coefficients are kept, the weighting is refused with the combination
+        return _BandLimitedOE(tuple(inputs), m, dt, scale, theta, None, errors, no_covariance=(
+            f"the band-limited step 1 does not determine {'; '.join(unc.combinations) or 'all its parameters'}"))
+    return _BandLimitedOE(tuple(inputs), m, dt, scale, theta, unc.covariance, errors)
+
+
+def _bl_names(inputs: Sequence[str], m: int) -> list[str]:
+    """Names of :class:`_BandLimitedOE`'s parameters, in its order (for the undetermined combinations)."""
+    modes = range(1, m + 1)
+    per_input = [f"{i}:{part}{r}" for i in inputs for part, rs in (("ReR", modes), ("ImR", modes), ("D", [""]))
+                 for r in rs]
+    return [*(f"log|lam{r}|" for r in modes), *(f"log zeta{r}" for r in modes), *per_input, "offset",
+            *(f"x0re{r}" for r in modes), *(f"x0im{r}" for r in modes)]
 
 
 def _stack_pairs(pairs: Sequence[_Pair], propagated: Mapping[str, tuple[Array, Array]], degree: int) -> tuple[

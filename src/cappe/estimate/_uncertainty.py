@@ -57,7 +57,7 @@ class LocalUncertainty:
     condition_number : float
         Largest over smallest kept singular value (inf at rank 0).
     singular_values : ndarray, shape (n,)
-        Singular values of the Jacobian with columns scaled by ``|p|``.
+        Singular values of the Jacobian with columns scaled by ``|p|`` (or the ``scale`` given).
     combinations : tuple of str
         Undetermined directions, e.g. ``"+0.71 m1 -0.71 m2"``.
     dof : int
@@ -101,6 +101,7 @@ def jacobian_uncertainty(
     residuals: ArrayLike,
     noise_variance: float | None = None,
     rtol: float = _RANK_RTOL,
+    scale: ArrayLike | None = None,
 ) -> LocalUncertainty:
     """Covariance, standard errors, 95 % intervals (Student t), correlation and identifiability.
 
@@ -118,6 +119,11 @@ def jacobian_uncertainty(
         Known variance of the weighted residuals; default ``|r|^2 / (n_obs - n_p)``.
     rtol : float
         Relative singular-value threshold for an undetermined direction.
+    scale : array_like, shape (n_p,), optional
+        Scales of the Jacobian's columns for the rank decision and the combinations. Default ``|p|`` (1 where
+        ``p = 0``): relative sensitivities, for physical parameters. Give ``1 / |column|`` (unit-norm columns) for
+        parameters whose value says nothing about their size: coefficients, offsets and initial states near 0,
+        which relative scaling would shrink to a false null direction.
 
     Examples
     --------
@@ -133,11 +139,14 @@ def jacobian_uncertainty(
     n_obs, n_p = jac.shape
     dof = max(n_obs - n_p, 1)
     s2 = float(noise_variance) if noise_variance is not None else float(r @ r) / dof
-    # relative sensitivities: columns scaled by |p| (by 1 where p = 0) so singular values compare like with like
-    scale = np.where(p != 0, np.abs(p), 1.0)
+    # relative sensitivities: columns scaled by |p| (by 1 where p = 0; or by `scale`), singular values compare alike
+    columns = np.where(p != 0, np.abs(p), 1.0) if scale is None else np.asarray(scale, dtype=float)
+    if columns.shape != p.shape or not np.all(np.isfinite(columns) & (columns > 0)):
+        msg = f"scale must hold {p.size} finite positive column scales; got {scale!r}"
+        raise ValueError(msg)
     # thin SVD (n_p x n_p right factor) when there are enough observations; the full one only when n_obs < n_p,
     # where the extra right singular vectors are the undetermined directions (never allocate n_obs x n_obs)
-    _, sv_short, vt = np.linalg.svd(jac * scale, full_matrices=n_obs < n_p)
+    _, sv_short, vt = np.linalg.svd(jac * columns, full_matrices=n_obs < n_p)
     sv = np.zeros(n_p)
     sv[: sv_short.size] = sv_short  # fewer observations than parameters: the missing singular values are zero
     top = sv[0] if sv[0] > 0 else 0.0
@@ -149,7 +158,7 @@ def jacobian_uncertainty(
     identifiable = weight <= _NULL_WEIGHT
     inv_s2 = np.where(keep, 1.0 / np.where(keep, sv, 1.0) ** 2, 0.0)
     cov_rel = (vt.T * inv_s2) @ vt * s2  # pseudo-inverse on the determined subspace
-    cov = cov_rel * np.outer(scale, scale)
+    cov = cov_rel * np.outer(columns, columns)
     std = np.sqrt(np.maximum(np.diag(cov), 0.0))
     std = np.where(identifiable, std, np.nan)
     t = float(stats.t.ppf(0.975, dof))
