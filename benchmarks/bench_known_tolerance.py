@@ -29,7 +29,7 @@ import numpy as np  # noqa: E402
 
 from benchmarks.bench_three_axis import independent_reference  # noqa: E402
 
-MODEL = "builtin:uniaxial-machine-tool"
+MODEL = os.environ.get("CAPPE_BENCH_MODEL", "builtin:uniaxial-machine-tool")
 FRACTION = 0.1
 SETTINGS = {"n_gsa": 64, "n_opt": 10}
 
@@ -89,7 +89,7 @@ def main(seeds: list[int]) -> None:
               f"missed {row['missed_after']}; {row['cpu_s']:.0f} CPU-s, {row['wall_s']:.0f} s", flush=True)
     total = sum(r["n"] for r in rows)
     print(f"all: {sum(r['covered_before'] for r in rows)}/{total} -> {sum(r['covered_after'] for r in rows)}/{total}")
-    out = Path(__file__).parent / "results" / "known_tolerance.json"
+    out = Path(__file__).parent / "results" / f"known_tolerance{os.environ.get('CAPPE_BENCH_SUFFIX', '')}.json"
     out.write_text(json.dumps(rows, indent=1))
 
 

@@ -3,10 +3,14 @@ intervals (``robust_uncertainty(known_tolerance=...)``, ``cappe identify --known
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
+import pytest
 
 from cappe.estimate._automated_steps import robust_uncertainty
 from cappe.estimate._result import ParameterEstimate
+from cappe.exceptions import DataError
 
 N_CLUSTERS, PER_CLUSTER = 60, 4
 THETA = np.array([3.0, 0.5, 8.0])  # unknowns
@@ -79,3 +83,22 @@ def test_zero_tolerance_leaves_the_intervals_as_they_were():
                               known_jacobian=x_k / NOISE, known_values=KNOWN)
     np.testing.assert_allclose(zero.ci95, plain.ci95)
     assert zero.diagnostics["uncertainty"]["known"]["largest_widening"] == 1.0
+
+
+@pytest.mark.parametrize(("tolerance", "said"), [
+    ({"nope": 0.1}, "'nope' is not a parameter of two-mass-rig"),
+    ({"k11": 0.1}, "'k11' is an unknown of this identification"),
+    ({"m1": -0.1}, "m1=-0.1 must be a relative standard deviation >= 0"),
+    ({"m1": float("nan")}, "must be a relative standard deviation >= 0"),
+])
+def test_automated_identification_refuses_bad_tolerances(tolerance, said):
+    from cappe.estimate import AutomatedIdentification
+    from cappe.modal import ModalEngine
+    from cappe.model import load_model
+
+    rig = load_model("builtin:two-mass-rig")
+    ref = ModalEngine(rig).modal_data()
+    est = AutomatedIdentification(rig, ["k11", "k22"], n_gsa=8, n_opt=1, n_permutations=0, n_workers=1,
+                                  known_tolerance=tolerance)
+    with pytest.raises(DataError, match=re.escape(said)):
+        est.fit(ref)
