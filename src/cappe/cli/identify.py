@@ -66,6 +66,13 @@ def register(sub: argparse._SubParsersAction) -> None:  # type: ignore[type-arg]
                             "simulate): with all three, the final refinement is weighted by them")
     add_deprecated(p, "--noise", dest="noise", instead="--noise-frequency F --noise-damping Z --noise-shape S",
                    metavar="F,Z,S")
+    p.add_argument("--known-tolerance", dest="known_tolerance", action="append", default=[],
+                   metavar="REL|NAME=REL",
+                   help="relative standard deviation of known parameters (0.1: 10 %%), which the 95 %% intervals "
+                        "then include (consider covariance): REL for every parameter the model tags disturbable, "
+                        "NAME=REL for any known one (repeatable; NAME=REL overrides REL). A parameter known to "
+                        "+-10 %% (uniform, or +-10 %% with either sign) has a standard deviation of at most 0.1, so "
+                        "0.1 is safe; without the option the intervals assume the known parameters exact")
     p.add_argument("--shapes", choices=("real", "complex"), default="real",
                    help="shapes the final refinement compares: realized model and reference shapes (real part at "
                         "their principal phase: blind to mode complexity that an LSCF/LSFD fit of hysteretically "
@@ -125,6 +132,44 @@ def _noise(args: argparse.Namespace) -> tuple[float, float, float] | None:
         msg = f"noise levels must be > 0; got {bad}"
         raise UsageError(msg)
     return (given["frequency"], given["damping"], given["shape"])
+
+
+def known_tolerance(items: list[str], structure: Any, unknowns: list[str]) -> dict[str, float]:
+    """The --known-tolerance entries as ``{known parameter: relative standard deviation}``: a bare REL for every
+    known parameter the model tags disturbable, NAME=REL for the one named (overriding the bare value)."""
+    bare: float | None = None
+    named: dict[str, float] = {}
+    for item in items:
+        name, sep, value = item.rpartition("=")
+        try:
+            rel = float(value)
+        except ValueError:
+            rel = math.nan
+        if not (math.isfinite(rel) and rel >= 0):
+            msg = (f"--known-tolerance {item!r}: the tolerance must be a relative standard deviation >= 0 like 0.1; "
+                   f"got {value!r}")
+            raise UsageError(msg)
+        if not sep:
+            bare = rel
+            continue
+        name = name.strip()
+        if name not in structure.parameter_names:
+            msg = f"--known-tolerance {item!r}: {name!r} is not a parameter of {structure.name}"
+            raise UsageError(msg)
+        if name in unknowns:
+            msg = f"--known-tolerance {item!r}: {name!r} is an unknown of this identification, not a known parameter"
+            raise UsageError(msg)
+        named[name] = rel
+    out: dict[str, float] = {}
+    if bare is not None:
+        tagged = [p.name for p in structure.parameters if p.disturbable and p.name not in unknowns]
+        if not tagged:
+            msg = (f"--known-tolerance {bare:g}: {structure.name} tags no known parameter disturbable; name them as "
+                   "NAME=REL")
+            raise UsageError(msg)
+        out = dict.fromkeys(tagged, bare)
+    out.update(named)
+    return out
 
 
 def combined_reference(paths: list[str], sensor_map: str | None = None) -> tuple[Any, list[str]]:
@@ -239,6 +284,11 @@ def run(args: argparse.Namespace) -> int:
     truth = read_parameters(args.truth) if args.truth else None
     if truth is not None:
         structure.resolve_parameters(truth)
+    unknowns = names(args.unknowns) or [p.name for p in structure.parameters if p.unknown]
+    tolerance = known_tolerance(args.known_tolerance, structure, unknowns)
+    if tolerance and args.first_order:
+        msg = "--known-tolerance needs the exact-mode refinement (leave out --first-order)"
+        raise UsageError(msg)
     reference, notes = combined_reference(args.reference, args.sensor_map)
     measured, frf_notes = measured_frfs(args.frf, args.frf_position, reference, args.sensor_map)
     notes += frf_notes
@@ -259,6 +309,7 @@ def run(args: argparse.Namespace) -> int:
         n_opt=args.n_opt, threshold=args.threshold, validation=validation, n_permutations=args.permutations,
         exact=not args.first_order, noise=_noise(args), n_workers=args.workers,
         executor=args.scheduler or args.executor, shapes=args.shapes, frf=measured or None,
+        known_tolerance=tolerance or None,
     )
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -276,6 +327,10 @@ def run(args: argparse.Namespace) -> int:
                           model=structure, run=_run_record(args))
         doc["diagnostics"]["report"] = args.report
     text = summary_text(result, truth, structure.name)
+    exact_knowns = [p.name for p in structure.parameters if p.disturbable and p.name not in unknowns]
+    if not tolerance and exact_knowns:
+        text += (f"\nnote: the intervals assume the known parameters exact ({len(exact_knowns)} tagged disturbable); "
+                 "--known-tolerance REL includes their uncertainty")
     if args.report:
         text += f"\nreport written to {args.report}"
     if args.out:
@@ -316,6 +371,14 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     elif joint.uncertainty is not None:
         lines.append(f"uncertainty: {joint.uncertainty}; 95 % intervals on a log scale; residuals "
                      f"weighted by {joint.weighting or 'the weights'}, {joint.shapes or 'complex'} shapes")
+    known = joint.estimate.diagnostics.get("uncertainty", {}).get("known")
+    if known:
+        tol = sorted(set(known["parameters"].values()))
+        level = " or ".join(f"{100 * v:.3g} %" for v in tol[:3]) + (" ..." if len(tol) > 3 else "")
+        lines.append(f"  including {len(known['parameters'])} known parameters' uncertainty (relative std {level}, "
+                     f"consider covariance): intervals up to {known['largest_widening']:.3g} x wider "
+                     f"({_widest(joint.estimate, known)})"
+                     + ("; not in the FRF refinement's intervals above" if frf is not None else ""))
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())
@@ -341,6 +404,14 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
         lines.append(f"not converged: {estimate.message}")
     lines += [f"warning: {w.partition(': ')[2] or w}" for w in result.warnings]
     return "\n".join(lines)
+
+
+def _widest(estimate: ParameterEstimate, known: dict[str, Any]) -> str:
+    """The unknown whose interval the known parameters widen most, with its relative std without and with them."""
+    name = known["largest_widening_parameter"]
+    k = list(estimate.names).index(name)
+    value = abs(float(estimate.values[k]))
+    return f"{name}: std {100 * known['std_without'][k] / value:.3g} % -> {100 * float(estimate.std[k]) / value:.3g} %"
 
 
 def _run_record(args: argparse.Namespace) -> dict[str, Any]:

@@ -151,6 +151,12 @@ class AutomatedIdentification(Estimator):
         Measured FRFs at reference positions (at model sensor channels). At identification positions, all unknowns
         are refined against them after the modal stages (:mod:`cappe.estimate._frf_refinement`); at the held-out
         position, the validation's FRAC and CSF compare the model with them (without ``truth``).
+    known_tolerance : mapping name -> float, optional
+        Relative standard deviation (0.1: 10 %) of known parameters whose error the 95 % intervals should include
+        (consider covariance, :func:`~cappe.estimate._automated_steps.robust_uncertainty`; exact-mode refinement
+        only). An error bounded by +-REL (uniform, or +-REL with a random sign as in the disturbed case) has a
+        standard deviation of at most REL, so REL itself is a safe value. Without it the intervals assume the
+        known parameters exact.
     **deprecated
         ``truth``, ``overlay`` and ``progress``: arguments of :meth:`fit` since cappe 0.1 (they do not shape the
         estimate; they say what one run validates against, which FRF it keeps and whether it shows progress).
@@ -220,6 +226,7 @@ class AutomatedIdentification(Estimator):
         n_workers: int | None = None,
         executor: Executor | str | None = None,
         frf: Sequence[MeasuredFRF] | None = None,
+        known_tolerance: Mapping[str, float] | None = None,
         **deprecated: Any,
     ) -> None:
         super().__init__(model, unknowns, bounds=bounds, start=start, values=values, rng=rng)
@@ -240,6 +247,7 @@ class AutomatedIdentification(Estimator):
         self.n_workers = n_workers
         self.executor = executor
         self.frf = frf
+        self.known_tolerance = known_tolerance
         if deprecated:  # the run options that were settings (one release with a warning): defaults of fit
             self._deprecated_run = _deprecated_run_options(deprecated, "AutomatedIdentification(...)")
 
@@ -281,11 +289,25 @@ class AutomatedIdentification(Estimator):
             residual_damping_threshold=float(self.residual_damping_threshold), damping_rows=self.damping_rows,
             max_iterations=int(self.max_iterations), refine_starts=int(self.refine_starts), exact=bool(self.exact),
             noise=None if self.noise is None else tuple(self.noise), n_permutations=int(self.n_permutations),
-            truth=run.truth, overlay=run.overlay, shapes=self.shapes)
+            truth=run.truth, overlay=run.overlay, shapes=self.shapes,
+            known_tolerance=None if not self.known_tolerance else dict(self.known_tolerance))
 
     def _check(self, model: NumericModel, space: ParameterSpace, data: Any) -> tuple[list[int], int | None]:
         """Validated data: (identification set indices, validation set index or None)."""
         name = model.structure.name
+        for known, rel in dict(self.known_tolerance or {}).items():
+            if known not in model.parameter_names:
+                msg = f"known_tolerance: {known!r} is not a parameter of {name}"
+                raise DataError(msg)
+            if known in space.names:
+                msg = f"known_tolerance: {known!r} is an unknown of this identification, not a known parameter"
+                raise DataError(msg)
+            if isinstance(rel, bool) or not isinstance(rel, (int, float)) or not (np.isfinite(rel) and rel >= 0):
+                msg = f"known_tolerance: {known}={rel!r} must be a relative standard deviation >= 0 (0.1: 10 %)"
+                raise DataError(msg)
+        if self.known_tolerance and not self.exact:
+            msg = "known_tolerance needs the exact-mode refinement (exact=True)"
+            raise DataError(msg)
         bad = [n for n, lo, hi in zip(space.names, space.lower, space.upper, strict=True)
                if not (np.isfinite(lo) and np.isfinite(hi) and lo > 0)]
         if bad:

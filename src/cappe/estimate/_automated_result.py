@@ -83,6 +83,8 @@ class AutomatedSettings:
     shapes : str
         ``"real"`` or ``"complex"``: the shapes the exact-mode refinement compares (see
         :class:`~cappe.estimate.AutomatedIdentification`).
+    known_tolerance : mapping name -> float or None
+        Relative standard deviation of the known parameters whose uncertainty the intervals consider.
     """
 
     n_gsa: int
@@ -100,13 +102,15 @@ class AutomatedSettings:
     truth: Mapping[str, float] | None
     overlay: tuple[str, str] | None
     shapes: str = "real"
+    known_tolerance: Mapping[str, float] | None = None
 
     def to_dict(self) -> dict[str, Any]:
         return {"n_gsa": self.n_gsa, "n_opt": self.n_opt, "threshold": self.threshold,
                 "criteria": list(self.criteria), "weights": list(self.weights),
                 "residual_damping_threshold": self.residual_damping_threshold, "exact": self.exact,
                 "noise": None if self.noise is None else list(self.noise), "objective": SUBPROBLEM_OBJECTIVE,
-                "shapes": self.shapes}
+                "shapes": self.shapes,
+                **({"known_tolerance": dict(self.known_tolerance)} if self.known_tolerance else {})}
 
 
 # -- step 1: global sensitivity -------------------------------------------------------------------------------

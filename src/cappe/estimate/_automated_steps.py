@@ -10,7 +10,7 @@ from __future__ import annotations
 import contextlib
 import time
 import warnings
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, replace
 from typing import Any, TypeVar
 
@@ -373,7 +373,11 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
     problem.weighting = weighting
     how = None
     if np.all(np.isfinite(values)):
-        est = robust_uncertainty(est, problem.jacobian(values), problem.residuals(values), problem.groups())
+        tolerance = dict(settings.known_tolerance or {})
+        kv = np.array([setup.base_model.nominal[setup.model.parameter_names.index(n)] for n in tolerance])
+        est = robust_uncertainty(
+            est, problem.jacobian(values), problem.residuals(values), problem.groups(), known_tolerance=tolerance,
+            known_jacobian=problem.jacobian(values, list(tolerance)) if tolerance else None, known_values=kv)
         how = str(est.diagnostics["uncertainty"]["std"])
         r = problem.residuals(values)
         est = replace(est, diagnostics={**est.diagnostics, "weighting": problem.weighting,
@@ -431,7 +435,9 @@ def frf_refinement_step(setup: Setup, start: Array) -> FRFRefinement:
 
 
 def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: Array,
-                       groups: NDArray[np.intp], clusters: str = "mode-position pairs") -> ParameterEstimate:
+                       groups: NDArray[np.intp], clusters: str = "mode-position pairs", *,
+                       known_tolerance: Mapping[str, float] | None = None, known_jacobian: Array | None = None,
+                       known_values: Array | None = None) -> ParameterEstimate:
     """The estimate with an honest uncertainty: per unknown the larger of the model-based standard error and a
     cluster-robust (sandwich) one, and 95 % intervals on a log scale, which never include zero or negative values.
 
@@ -442,6 +448,12 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     whatever their correlation and variance within a cluster (G / (G - n): the clusters' residuals are shrunk by
     the fit of n unknowns). Intervals ``value * exp(+-t sigma / value)`` with Student's t at ``G - 1`` degrees of
     freedom (the model-based ones where G <= n + 1: too few clusters for a sandwich).
+
+    Both reflect the residuals' scatter only. An error of a known parameter shifts every cluster alike, so it
+    does not show there; with ``known_tolerance`` the known parameters are "consider parameters"
+    (Schmidt-Kalman): a relative error ``dk`` of them moves the least-squares estimate by
+    ``G dk``, ``G = -(J_u^T J_u)^+ J_u^T J_k`` (both Jacobians by relative changes, weighted like the residuals),
+    so the unknowns' relative covariance gains ``G diag(tol^2) G^T``, added to the larger of the two above.
 
     Parameters
     ----------
@@ -455,6 +467,12 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         Cluster (mode-position pair) of every residual.
     clusters : str
         What a cluster is, for ``diagnostics["uncertainty"]``.
+    known_tolerance : mapping name -> float, optional
+        Relative standard deviation of each considered known parameter (0.1: 10 %).
+    known_jacobian : ndarray, shape (n_r, len(known_tolerance)), optional
+        ``d r / d k`` of the considered known parameters at the estimate (SI), in the order of ``known_tolerance``.
+    known_values : ndarray, shape (len(known_tolerance),), optional
+        The considered known parameters' values (SI).
 
     Returns
     -------
@@ -479,6 +497,22 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         std_rel = np.where(np.isfinite(std_rel), np.maximum(std_rel, sandwich), std_rel)
         how = f"larger of model-based and cluster-robust sandwich over {g} {clusters}"
         dof = g - 1
+    considered: dict[str, Any] | None = None
+    if known_tolerance:
+        tol = np.array([float(v) for v in known_tolerance.values()])
+        jk = np.asarray(known_jacobian, dtype=float) * np.asarray(known_values, dtype=float)[None, :]
+        gain = -np.linalg.pinv(jr.T @ jr, rcond=1e-12, hermitian=True) @ (jr.T @ jk)  # (n, n_k)
+        consider = np.sqrt(np.einsum("ik,k,ik->i", gain, tol**2, gain))
+        before = std_rel
+        std_rel = np.sqrt(std_rel**2 + consider**2)
+        factor = np.where(before > 0, std_rel / before, np.inf)
+        worst = int(np.nanargmax(np.where(np.isfinite(factor), factor, -np.inf))) if np.any(np.isfinite(factor)) \
+            else 0
+        how += " + consider covariance of the known parameters"
+        considered = {"parameters": dict(known_tolerance.items()), "tolerance": "relative standard deviation",
+                      "std_without": (before * np.abs(p)).tolist(), "std_from_known": (consider * np.abs(p)).tolist(),
+                      "widening": factor.tolist(), "largest_widening": float(factor[worst]),
+                      "largest_widening_parameter": estimate.names[worst]}
     t = float(stats.t.ppf(0.975, dof))
     std = std_rel * np.abs(p)
     positive = p > 0
@@ -489,7 +523,7 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     ci[~np.isfinite(std)] = np.nan
     diag = {**estimate.diagnostics,
             "uncertainty": {"std": how, "ci95": f"log scale, Student t with {dof} degrees of freedom",
-                            "clusters": int(g)}}
+                            "clusters": int(g), **({"known": considered} if considered else {})}}
     return replace(estimate, std=std, ci95=ci, diagnostics=diag)
 
 

@@ -244,7 +244,7 @@ class ExactModalProblem:
         """
         return self._evaluate(np.asarray(p, dtype=float))[0]
 
-    def jacobian(self, p: Array) -> Array:
+    def jacobian(self, p: Array, parameters: Sequence[str] | None = None) -> Array:
         """``d r / d p`` (n_r, n), analytic: first-order perturbation of the state matrix's eigen-decomposition, or
         of each mode's quadratic eigenproblem where the engine solved the modes that way
         (:func:`cappe.modal.exact_mode_derivatives`), one per set instead of one per unknown; the residuals are
@@ -254,16 +254,20 @@ class ExactModalProblem:
         ----------
         p : ndarray, shape (space.n,)
             The unknowns in SI units.
+        parameters : sequence of str, optional
+            Model parameters to differentiate by instead of the unknowns, e.g. known ones whose uncertainty the
+            intervals consider (:func:`~cappe.estimate._automated_steps.robust_uncertainty`); default the unknowns.
 
         Returns
         -------
-        ndarray, shape (n_r, space.n)
-            Derivatives of the residuals by the SI unknowns (1 / unit of each unknown).
+        ndarray, shape (n_r, space.n) or (n_r, len(parameters))
+            Derivatives of the residuals by the SI parameters (1 / unit of each parameter).
         """
         p = np.asarray(p, dtype=float)
         _, _, paired = self._evaluate(p)
         full = self.space.full(p[None, :])[0]
-        columns = [self.model.parameter_names.index(n) for n in self.space.names]
+        wanted = self.space.names if parameters is None else parameters
+        columns = [self.model.parameter_names.index(n) for n in wanted]
 
         def one_set(k: int) -> Array:
             return self._set_jacobian(full, k, paired[k], columns, self.reference.sets[k])
