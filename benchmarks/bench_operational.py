@@ -18,9 +18,12 @@ false-alarm rate per measurement) and the alarms raised. Because 1000 measuremen
 loosely, the healthy stream's deviations are also replayed through the charts in a moving-block bootstrap
 (blocks of 20 keep the serial correlation of the drift; 200 000 measurements) for the rate itself.
 
-``python -m benchmarks.bench_operational CHAIN [N_HEALTHY N_TRIALS N_BASELINE]`` (CHAIN ``operational`` or
-``hammer``; defaults 1000, 20, 96) writes ``benchmarks/results/operational_CHAIN.json`` (about 0.5 s per operational
-measurement, BLAS on one thread as a ``cappe`` command runs).
+``python -m benchmarks.bench_operational CHAIN [N_HEALTHY N_TRIALS N_BASELINE FAULTS]`` (CHAIN ``operational`` or
+``hammer``; defaults 1000, 20, 96, ``front``) writes ``benchmarks/results/operational_CHAIN.json`` (about 0.5 s per
+operational measurement, BLAS on one thread as a ``cappe`` command runs). FAULTS, comma-separated from
+:data:`FAULTS` (``front`` 10 %, ``screw3`` 50 %, ``preload`` 30 %, each a step), runs the trials of each against the
+one baseline and healthy stream (N_HEALTHY 0: none); other than ``front`` alone it writes
+``operational_CHAIN_FAULT1_FAULT2.json``, one row per fault, with what the first alarm named (``diagnosed_as``).
 """
 
 from __future__ import annotations
@@ -75,7 +78,53 @@ def _bootstrap_rate(detector: Any, deviations: np.ndarray, stds: np.ndarray, n: 
     return signals / count
 
 
-def run_chain(kind: str, n_healthy: int, n_trials: int, n_baseline: int = N_BASELINE) -> dict[str, Any]:
+#: The faults of the trials: name -> (scenario, component, severity). Each is a step from the 6th measurement on.
+FAULTS = {"front": ("bearing-loss", "front", 0.10), "screw3": ("bearing-loss", "screw3", 0.50),
+          "preload": ("preload-loss", None, 0.30)}
+
+
+def _trials(kind: str, config: Any, model: NumericModel, monitor: Monitor, baseline: Any, fault: str,
+            n_trials: int) -> dict[str, Any]:
+    """Trials of 5 healthy measurements, then 5 with the fault: delay to the first alarm and what it names."""
+    scenario, component, severity = FAULTS[fault]
+    expected = component or "preload"
+    delays: list[int | None] = []
+    named: list[str | None] = []
+    early = 0
+    for trial in range(n_trials):
+        when = START + timedelta(days=1, hours=float(np.random.default_rng(50 + trial).uniform(0, 24)))
+        records = _records(kind, config, model, scenario, n=10, fault_at=5, component=component,
+                           severity=severity, rng=100 + trial, start=when)
+        state = None
+        first: tuple[int, str] | None = None
+        for k, (data, cond, truth) in enumerate(records):
+            if baseline.judge(cond)[0]:
+                continue
+            state, _, alarms = monitor.step(state, _analyse(monitor, data, baseline), cond, baseline)
+            if alarms and truth is None:
+                early += 1
+            if alarms and truth is not None and first is None:
+                first = (k - 5 + 1, alarms[0].component)
+        delays.append(None if first is None else first[0])
+        named.append(first[1] if first else None)
+        print(f"{kind} {fault}: trial {trial}: alarm at faulty measurement {delays[-1]}, {named[-1] or '-'}",
+              flush=True)
+    found = [d for d in delays if d is not None]
+    located = sum(n == expected for n in named)
+    return {
+        "fault": {"scenario": scenario, "component": expected, "severity": severity},
+        "trials": n_trials,
+        "detected_within_5": int(sum(d is not None and d <= 5 for d in delays)),
+        "median_delay": float(np.median(found)) if found else None,
+        "max_delay": max(found) if found else None,
+        "located_front" if fault == "front" else "located": located,
+        "diagnosed_as": {str(n): named.count(n) for n in sorted(set(named), key=str)},
+        "alarms_before_fault": early,
+    }
+
+
+def run_chain(kind: str, n_healthy: int, n_trials: int, n_baseline: int = N_BASELINE,
+              faults: tuple[str, ...] = ("front",)) -> list[dict[str, Any]]:
     model = NumericModel(load_model("builtin:spindle-bearing"))
     config = default_config(model, machine=f"spindle-{kind}", source="builtin:spindle-bearing", outputs=OUTPUTS,
                             band=BAND, excitation="operational" if kind == "operational" else "measured")
@@ -90,31 +139,11 @@ def run_chain(kind: str, n_healthy: int, n_trials: int, n_baseline: int = N_BASE
     print(f"{kind}: baseline scale % " + ", ".join(f"{n} {100 * s:.2f}" for n, s in
                                                    zip(baseline.names, baseline.scale, strict=True)), flush=True)
 
-    # fault trials: 5 healthy, then 5 with the front bearing 10 % lost
-    delays: list[int | None] = []
-    located: list[bool] = []
-    early = 0
-    for trial in range(n_trials):
-        when = START + timedelta(days=1, hours=float(np.random.default_rng(50 + trial).uniform(0, 24)))
-        records = _records(kind, config, model, "bearing-loss", n=10, fault_at=5, component="front",
-                           severity=0.10, rng=100 + trial, start=when)
-        state = None
-        first: tuple[int, str] | None = None
-        for k, (data, cond, fault) in enumerate(records):
-            if baseline.judge(cond)[0]:
-                continue
-            state, _, alarms = monitor.step(state, _analyse(monitor, data, baseline), cond, baseline)
-            if alarms and fault is None:
-                early += 1
-            if alarms and fault is not None and first is None:
-                first = (k - 5 + 1, alarms[0].component)
-        delays.append(None if first is None else first[0])
-        located.append(first is not None and first[1] == "front")
-        print(f"{kind}: trial {trial}: alarm at faulty measurement {delays[-1]}, "
-              f"{'front' if located[-1] else (first[1] if first else '-')}", flush=True)
+    trials = {fault: _trials(kind, config, model, monitor, baseline, fault, n_trials) for fault in faults}
 
     # a continuous healthy stream over the following days
-    stream = _records(kind, config, model, "healthy", n=n_healthy, rng=7, start=START + timedelta(days=2))
+    stream = (_records(kind, config, model, "healthy", n=n_healthy, rng=7, start=START + timedelta(days=2))
+              if n_healthy else [])
     detector = monitor.detector(baseline)
     state = None
     chart_state = None
@@ -133,32 +162,29 @@ def run_chain(kind: str, n_healthy: int, n_trials: int, n_baseline: int = N_BASE
         deviations.append(deviation)
         stds.append(log_std)
     dev = np.array(deviations)
-    rate = _bootstrap_rate(detector, dev, np.array(stds), 200_000, rng=3)
-    found = [d for d in delays if d is not None]
-    row = {
+    rate = _bootstrap_rate(detector, dev, np.array(stds), 200_000, rng=3) if len(dev) else None
+    common = {
         "chain": kind,
         "baseline_measurements": n_baseline,
         "baseline_scale_percent": {n: 100 * float(s) for n, s in zip(baseline.names, baseline.scale, strict=True)},
-        "trials": n_trials,
-        "detected_within_5": int(sum(d is not None and d <= 5 for d in delays)),
-        "median_delay": float(np.median(found)) if found else None,
-        "max_delay": max(found) if found else None,
-        "located_front": int(sum(located)),
-        "alarms_before_fault": early,
         "healthy_measurements": len(stream),
         "healthy_judged": judged,
         "healthy_signal_measurements": signal_count,
         "healthy_alarms": alarm_count,
-        "healthy_z_std": (dev.std(axis=0) / baseline.scale).tolist(),
+        "healthy_z_std": (dev.std(axis=0) / baseline.scale).tolist() if len(dev) else None,
         "bootstrap_false_alarm_rate": rate,
         "simulation_s": t_sim,
         "analysis_s": t_analyse,
     }
-    print(f"{kind}: detected within 5 in {row['detected_within_5']}/{n_trials} (median delay "
-          f"{row['median_delay']}), located {row['located_front']}/{n_trials}; healthy: {signal_count} signalling "
-          f"measurement(s) and {alarm_count} alarm(s) in {judged} judged of {len(stream)}; bootstrap rate "
-          f"{rate:.2e}; analysis {t_analyse:.2f} s per measurement", flush=True)
-    return row
+    rows = []
+    for fault, trial in trials.items():
+        rows.append({**common, **trial})
+        print(f"{kind} {fault}: detected within 5 in {trial['detected_within_5']}/{n_trials} (median delay "
+              f"{trial['median_delay']}), named {trial['diagnosed_as']}; {trial['alarms_before_fault']} alarm(s) "
+              f"before the fault; healthy: {signal_count} signalling measurement(s) and {alarm_count} alarm(s) in "
+              f"{judged} judged of {len(stream)}; bootstrap rate {rate}; analysis {t_analyse:.2f} s per "
+              f"measurement", flush=True)
+    return rows
 
 
 def main() -> None:
@@ -166,12 +192,22 @@ def main() -> None:
     n_healthy = int(sys.argv[2]) if len(sys.argv) > 2 else 1000
     n_trials = int(sys.argv[3]) if len(sys.argv) > 3 else 20
     n_baseline = int(sys.argv[4]) if len(sys.argv) > 4 else N_BASELINE
+    faults = tuple(sys.argv[5].split(",")) if len(sys.argv) > 5 else ("front",)
     if kind not in ("operational", "hammer"):
         msg = f"chain must be 'operational' or 'hammer'; got {kind!r}"
         raise SystemExit(msg)
+    unknown = [f for f in faults if f not in FAULTS]
+    if unknown:
+        msg = f"faults must be among {sorted(FAULTS)}; got {unknown}"
+        raise SystemExit(msg)
+    t0 = time.process_time()
     with blas_threads(1):  # as a cappe command runs (cappe.parallel.command_blas_threads): ~10x on 2 cores
-        row = run_chain(kind, n_healthy, n_trials, n_baseline)
-    print(f"wrote {write_results(f'operational_{kind}', [row])}")
+        rows = run_chain(kind, n_healthy, n_trials, n_baseline, faults)
+    cpu = time.process_time() - t0
+    for row in rows:
+        row["cpu_s"] = cpu
+    name = f"operational_{kind}" if faults == ("front",) else f"operational_{kind}_{'_'.join(faults)}"
+    print(f"wrote {write_results(name, rows)} ({cpu:.0f} CPU s)")
 
 
 if __name__ == "__main__":

@@ -525,6 +525,13 @@ CASES = [
           ("--detection", ["--detection", "ewma"]), ("--false-alarm-rate", ["--false-alarm-rate", "0.01"]),
           ("--shift", ["--shift", "3"]), ("--severity", ["--severity", "tolerable=0.02,intolerable=0.2"]),
           ("--slow-every", ["--slow-every", "5"]), ("--excitation", ["--excitation", "operational"]))],
+    # the SSI-COV settings of an operational machine: what the stored config holds (their effect on the modes
+    # found: tests/monitor/test_operational.py::test_ssi_settings_reach_the_modal_analysis)
+    *[_case("monitor init", option, ["monitor", "init", "{w}/new.db", "--machine", "x", "--model",
+                                     "builtin:spindle-bearing", "--excitation", "operational", "--json"], extra)
+      for option, extra in (
+          ("--ssi-orders", ["--ssi-orders", "4:24:4"]), ("--ssi-block-rows", ["--ssi-block-rows", "40"]),
+          ("--ssi-stability", ["--ssi-stability", "mac_tol=0.9"]))],
     _case("monitor init", "store", ["monitor", "init", "{w}/new.db", "--machine", "x", "--model", CAR],
           variant=["monitor", "init", "{w}/new2.db", "--machine", "x", "--model", CAR]),
     _case("monitor init", "--json", ["monitor", "init", "{w}/new.db", "--machine", "x", "--model", CAR], ["--json"]),

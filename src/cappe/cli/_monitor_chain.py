@@ -62,6 +62,15 @@ def register(cmds: argparse._SubParsersAction) -> None:  # type: ignore[type-arg
                    help="measured: FRFs or time data with the force (default); operational: time data of the "
                         "outputs only, recorded in production (output-only modal analysis; --inputs: where the "
                         "process force acts)")
+    p.add_argument("--ssi-orders", metavar="LO:HI[:STEP]",
+                   help="model orders of the SSI-COV stabilization diagram of an operational machine, STEP default 2 "
+                        "(default 4, 8, ... up to twice the modes in the band plus 8)")
+    p.add_argument("--ssi-block-rows", type=int, metavar="N",
+                   help="block rows of the SSI-COV Toeplitz matrix; outputs x N bound the model order (default: a "
+                        "period of the band's lowest frequency)")
+    p.add_argument("--ssi-stability", metavar="NAME=F,...",
+                   help="SSI-COV stabilization criteria: freq_tol (default 0.01), damping_tol (0.1), mac_tol "
+                        "(0.95), min_fraction of the orders a mode must be stable in (0.5), max_damping (0.1)")
     p.add_argument("--replace", action="store_true", help="replace an existing machine's config")
     p.set_defaults(func=init)
 
@@ -212,6 +221,7 @@ def init(args: argparse.Namespace) -> int:
                                 "shift": args.shift, "slow_every": args.slow_every, "excitation": args.excitation}
     if severity is not None:
         settings["severity"] = severity
+    settings.update(_ssi_settings(args))
     config = default_config(ctx.numeric, machine=args.machine, source=args.model, params=ctx.overrides,
                             position=ctx.position if args.position else None, inputs=names(args.inputs),
                             outputs=names(args.outputs), band=parse_band(args.band) if args.band else None,
@@ -225,9 +235,35 @@ def init(args: argparse.Namespace) -> int:
     lines += [f"  {c.name:10s} {c.label:20s} {', '.join(c.parameters)}" for c in config.components]
     if config.fault_parameters:
         lines.append(f"fault parameters: {', '.join(config.fault_parameters)}")
+    if config.excitation == "operational":
+        orders = ("automatic" if config.ssi_orders is None
+                  else "{}-{} step {}".format(*config.ssi_orders))
+        rows = "automatic" if config.ssi_block_rows is None else str(config.ssi_block_rows)
+        criteria = ", ".join(f"{k}={v:g}" for k, v in config.ssi_stability.items()) or "ssi_cov defaults"
+        lines.append(f"SSI-COV: model orders {orders}, block rows {rows}, stabilization {criteria}")
     lines += [f"note: {text}" for text in _limitations(config)]
     emit(args, config.to_dict(), "\n".join(lines))
     return 0
+
+
+def _ssi_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """The SSI-COV options of ``monitor init`` as :class:`~cappe.monitor.MonitorConfig` fields."""
+    settings: dict[str, Any] = {}
+    if args.ssi_orders:
+        parts = args.ssi_orders.split(":")
+        try:
+            numbers = [int(p) for p in parts]
+        except ValueError:
+            numbers = []
+        if len(numbers) not in (2, 3):
+            msg = f"--ssi-orders must be LO:HI or LO:HI:STEP with integers; got {args.ssi_orders!r}"
+            raise UsageError(msg)
+        settings["ssi_orders"] = (numbers[0], numbers[1], numbers[2] if len(numbers) == 3 else 2)
+    if args.ssi_block_rows is not None:
+        settings["ssi_block_rows"] = args.ssi_block_rows
+    if args.ssi_stability:
+        settings["ssi_stability"] = number_pairs(names(args.ssi_stability) or [], "--ssi-stability")
+    return settings
 
 
 def _limitations(config: Any) -> list[str]:

@@ -386,16 +386,18 @@ class Monitor:
         freq = np.full(target.size, np.nan)
         zeta = np.full(target.size, np.nan)
         shapes = np.full((n_out, target.size), np.nan, dtype=complex)
-        top = 4 * ((2 * target.size + 8 + 3) // 4)  # twice the modes in the band and room for noise poles
-        block_rows = max(int(np.ceil(data.fs / max(self.config.band[0], 1.0))), top // n_out + 1)
+        orders, block_rows, capped = self.ssi_settings(target.size, data.fs)
+        notes = [f"output-only modal analysis: model orders stop at {orders[-1]}, what {block_rows} block rows x "
+                 f"{n_out} outputs allow"] if capped else []
+        criteria: dict[str, Any] = dict(self.config.ssi_stability)  # ssi_cov's defaults for the others
         with warnings.catch_warnings(record=True) as caught:
             warnings.simplefilter("always")
             try:
-                found = ssi_cov(data, outputs=list(self.config.outputs), band=self.config.band,
-                                orders=range(4, top + 1, 4), block_rows=block_rows)
+                found = ssi_cov(data, outputs=list(self.config.outputs), band=self.config.band, orders=orders,
+                                block_rows=block_rows, **criteria)
             except DataError as exc:
-                return freq, zeta, shapes, [f"output-only modal analysis failed: {exc}"]
-        notes = [f"output-only modal analysis: {w.message}" for w in caught]
+                return freq, zeta, shapes, [*notes, f"output-only modal analysis failed: {exc}"]
+        notes += [f"output-only modal analysis: {w.message}" for w in caught]
         if found.n_modes and target.size:
             cost = np.abs(np.log(found.frequency[:, None] / target[None, :]))
             rows, cols = linear_sum_assignment(cost)
@@ -406,6 +408,40 @@ class Monitor:
         if missing_modes:
             notes.append(f"modes {missing_modes} not found in the record")
         return freq, zeta, shapes, notes
+
+    def ssi_settings(self, n_modes: int, fs: float) -> tuple[list[int], int, bool]:
+        """Model orders and block rows of the SSI-COV of a record: the config's, else derived from the modes.
+
+        Parameters
+        ----------
+        n_modes : int
+            Monitored modes in the band.
+        fs : float
+            Sampling rate of the record in Hz.
+
+        Returns
+        -------
+        orders : list of int
+            Model orders of the stabilization diagram, ascending.
+        block_rows : int
+            Block rows of the Toeplitz matrix.
+        capped : bool
+            Whether automatic orders were cut to what configured block rows allow.
+        """
+        n_out = len(self.config.outputs)
+        if self.config.ssi_orders is not None:
+            lo, hi, step = self.config.ssi_orders
+            orders = list(range(lo, hi + 1, step))
+        else:
+            top = 4 * ((2 * n_modes + 8 + 3) // 4)  # twice the modes in the band and room for noise poles
+            orders = list(range(4, top + 1, 4))
+        if self.config.ssi_block_rows is not None:
+            block_rows = self.config.ssi_block_rows
+            allowed = [n for n in orders if n <= n_out * block_rows]
+            capped = len(allowed) < len(orders)
+            return (allowed or [2]), block_rows, capped
+        block_rows = max(int(np.ceil(fs / max(self.config.band[0], 1.0))), orders[-1] // n_out + 1)
+        return orders, block_rows, False
 
     def _analyse_operational(self, data: FRFData | TimeData, start: ArrayLike | None) -> Analysis:
         """Steps 1-3 on an output-only record: SSI-COV modes, then the factors from frequencies and shapes."""

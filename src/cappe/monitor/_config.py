@@ -24,13 +24,18 @@ import numpy as np
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, Structure
 
-__all__ = ["CONFIG_FORMAT", "EXCITATIONS", "SEVERITY_GRADES", "Component", "MonitorConfig", "SeverityThresholds",
-           "default_components", "default_config", "severity_rank", "worst_severity"]
+__all__ = ["CONFIG_FORMAT", "EXCITATIONS", "SEVERITY_GRADES", "SSI_STABILITY", "Component", "MonitorConfig",
+           "SeverityThresholds", "default_components", "default_config", "severity_rank", "worst_severity"]
 
 CONFIG_FORMAT = "cappe.monitor-config/1"
 
 #: How a machine's measurements are excited: a measured force (FRFs), or the unmeasured process (output-only).
 EXCITATIONS = ("measured", "operational")
+
+#: Stabilization criteria of output-only modal analysis that a machine's config may set: the keyword arguments of
+#: :func:`cappe.identify.ssi_cov` (its defaults apply to those not set) and the range of each.
+SSI_STABILITY = {"freq_tol": (0.0, 0.5), "damping_tol": (0.0, 10.0), "mac_tol": (0.0, 1.0),
+                 "min_fraction": (0.0, 1.0), "max_damping": (0.0, 1.0)}
 
 #: The thesis's three grades (1.1, block 6), from harmless to stop-the-machine.
 SEVERITY_GRADES = ("tolerable", "conditionally tolerable", "intolerable")
@@ -195,6 +200,15 @@ class MonitorConfig:
         ``"measured"``: measurements are FRFs, or time data with the force channels (a hammer or shaker test).
         ``"operational"``: time data of the outputs only, recorded in operation under the unmeasured process
         force (output-only modal analysis, SSI-COV; the inputs are then where that force acts).
+    ssi_orders : (int, int, int) or None
+        Model orders of the SSI-COV stabilization diagram of an operational machine: lowest, highest, step (None:
+        4, 8, ... up to twice the monitored modes in the band plus room for noise poles).
+    ssi_block_rows : int or None
+        Block rows of the SSI-COV Toeplitz matrix; outputs x block rows bound the model order (None: a period of
+        the band's lowest frequency and enough for the highest order). Given with automatic orders, the orders stop
+        at what the block rows allow.
+    ssi_stability : mapping name -> float
+        Stabilization criteria of :data:`SSI_STABILITY` that differ from :func:`cappe.identify.ssi_cov`'s defaults.
     """
 
     machine: str
@@ -216,6 +230,9 @@ class MonitorConfig:
     max_order: int = 24
     slow_every: int = 0
     excitation: str = "measured"
+    ssi_orders: tuple[int, int, int] | None = None
+    ssi_block_rows: int | None = None
+    ssi_stability: Mapping[str, float] = field(default_factory=dict)
 
     def __post_init__(self) -> None:
         if not self.machine:
@@ -263,6 +280,37 @@ class MonitorConfig:
             msg = (f"monitor config '{self.machine}': max_order must be >= 2 and slow_every >= 0; got "
                    f"{self.max_order}, {self.slow_every}")
             raise DataError(msg)
+        self._check_ssi()
+
+    def _check_ssi(self) -> None:
+        """The SSI-COV settings: only for an operational machine, orders and block rows that fit together."""
+        where = f"monitor config '{self.machine}'"
+        if self.excitation != "operational" and (self.ssi_orders is not None or self.ssi_block_rows is not None
+                                                 or self.ssi_stability):
+            msg = f"{where}: SSI-COV settings apply to excitation 'operational' only; got {self.excitation!r}"
+            raise DataError(msg)
+        if self.ssi_orders is not None:
+            lo, hi, step = self.ssi_orders
+            if not (2 <= lo <= hi and step >= 1):
+                msg = f"{where}: ssi_orders must be LOWEST >= 2, HIGHEST >= LOWEST, STEP >= 1; got {self.ssi_orders}"
+                raise DataError(msg)
+        if self.ssi_block_rows is not None:
+            rows = self.ssi_block_rows
+            if rows < 2:
+                msg = f"{where}: ssi_block_rows must be >= 2; got {rows}"
+                raise DataError(msg)
+            if self.ssi_orders is not None and self.ssi_orders[1] > rows * len(self.outputs):
+                msg = (f"{where}: ssi_block_rows {rows} x {len(self.outputs)} outputs allow model orders up to "
+                       f"{rows * len(self.outputs)}; got ssi_orders up to {self.ssi_orders[1]}")
+                raise DataError(msg)
+        for name, value in self.ssi_stability.items():
+            if name not in SSI_STABILITY:
+                msg = f"{where}: unknown SSI-COV stabilization criterion {name!r}; known: {list(SSI_STABILITY)}"
+                raise DataError(msg)
+            low, high = SSI_STABILITY[name]
+            if not (np.isfinite(value) and low < value <= high):
+                msg = f"{where}: SSI-COV {name} must be in ({low:g}, {high:g}]; got {value!r}"
+                raise DataError(msg)
 
     @property
     def component_names(self) -> tuple[str, ...]:
@@ -355,6 +403,9 @@ class MonitorConfig:
             "max_order": self.max_order,
             "slow_every": self.slow_every,
             "excitation": self.excitation,
+            "ssi_orders": None if self.ssi_orders is None else list(self.ssi_orders),
+            "ssi_block_rows": self.ssi_block_rows,
+            "ssi_stability": dict(self.ssi_stability),
         }
 
     @classmethod
@@ -397,12 +448,20 @@ class MonitorConfig:
                 max_order=int(data.get("max_order", 24)),
                 slow_every=int(data.get("slow_every", 0)),
                 excitation=str(data.get("excitation", "measured")),
+                ssi_orders=None if data.get("ssi_orders") is None else _three_ints(data["ssi_orders"]),
+                ssi_block_rows=None if data.get("ssi_block_rows") is None else int(data["ssi_block_rows"]),
+                ssi_stability={str(k): float(v) for k, v in data.get("ssi_stability", {}).items()},
             )
         except (KeyError, TypeError, IndexError, ValueError) as exc:
             if isinstance(exc, DataError):
                 raise
             msg = f"monitor config is malformed: {type(exc).__name__} {exc}"
             raise DataError(msg) from exc
+
+
+def _three_ints(values: Sequence[Any]) -> tuple[int, int, int]:
+    lo, hi, step = (int(v) for v in values)
+    return lo, hi, step
 
 
 def _labels(name: str) -> str:
