@@ -1120,11 +1120,7 @@ class NumericModel:
         array([[ 1., -1.],
                [-1.,  1.]])
         """
-        p = self.vector(params)
-        if p.ndim != 1:
-            msg = "matrix_derivatives takes a single parameter vector"
-            raise ModelError(msg)
-        pos = self.position_vector(position)
+        p, pos = self._single(params, position, "matrix_derivatives")
         n = self.n_dof
         jac, sel = self._coefficient_jacobian(p, pos, parameters)
         patterns = self._patterns(pos)
@@ -1135,15 +1131,8 @@ class NumericModel:
             part = jac[self._slices[name]]
             terms = np.flatnonzero(np.any(part != 0, axis=1))
             deriv = (part[terms].T @ patterns[name][terms]).reshape(sel.size, n, n)
-            func = self._residual_derivative_funcs.get(name)
-            if func is not None:
-                with np.errstate(all="ignore"):
-                    mats = func(*p, *_scalars(pos))
-                    for k, column in enumerate(sel):
-                        deriv[k] += np.asarray(mats[column], dtype=float)
-                if not np.isfinite(deriv).all():
-                    raise self._nonfinite_error(p[None, :], pos)
-            out[name] = deriv
+            extra = self._residual_derivatives(name, p, pos, sel)
+            out[name] = deriv if extra is None else deriv + extra
         return out
 
     def matrix_derivative_products(
@@ -1188,11 +1177,7 @@ class NumericModel:
         array([[ 1., -1.],
                [-1.,  1.]])
         """
-        p = self.vector(params)
-        if p.ndim != 1:
-            msg = "matrix_derivative_products takes a single parameter vector"
-            raise ModelError(msg)
-        pos = self.position_vector(position)
+        p, pos = self._single(params, position, "matrix_derivative_products")
         n = self.n_dof
         cols = np.asarray(vectors)
         if cols.ndim != 2 or cols.shape[0] != n:
@@ -1207,16 +1192,32 @@ class NumericModel:
             products = np.asarray(self._term_operators(pos)[name] @ cols).reshape(-1, n * m)  # (n_terms, n m)
             # each term moves with one or two parameters: the weighting is a sparse product too
             result = np.asarray(sps.csr_array(part[terms].T) @ products[terms]).reshape(sel.size, n, m)
-            func = self._residual_derivative_funcs.get(name)
-            if func is not None:
-                with np.errstate(all="ignore"):
-                    mats = func(*p, *_scalars(pos))
-                    extra = np.stack([np.asarray(mats[column], dtype=float) for column in sel])
-                if not np.isfinite(extra).all():
-                    raise self._nonfinite_error(p[None, :], pos)
-                result = result + extra @ cols
-            out[name] = result
+            extra = self._residual_derivatives(name, p, pos, sel)
+            out[name] = result if extra is None else result + extra @ cols
         return out
+
+    def _single(self, params: ParamsLike, position: Mapping[str, float] | None,
+                who: str) -> tuple[Array, tuple[float, ...]]:
+        """One parameter vector (a batch refused, naming the method ``who``) and the position's key."""
+        p = self.vector(params)
+        if p.ndim != 1:
+            msg = f"{who} takes a single parameter vector"
+            raise ModelError(msg)
+        return p, self.position_vector(position)
+
+    def _residual_derivatives(self, name: str, p: Array, pos: tuple[float, ...],
+                              sel: NDArray[np.intp]) -> Array | None:
+        """The derivatives of matrix ``name``'s residual part (the terms its patterns do not hold), (n_sel, n, n),
+        or None where it has none."""
+        func = self._residual_derivative_funcs.get(name)
+        if func is None:
+            return None
+        with np.errstate(all="ignore"):
+            mats = func(*p, *_scalars(pos))
+            extra = np.stack([np.asarray(mats[column], dtype=float) for column in sel])
+        if not np.isfinite(extra).all():
+            raise self._nonfinite_error(p[None, :], pos)
+        return extra
 
     def _term_operators(self, pos: tuple[float, ...]) -> dict[str, sps.csr_array]:
         """Per matrix: its patterns stacked as rows, (n_terms n, n) sparse, so that one product with (n, m) columns
