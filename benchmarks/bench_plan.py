@@ -43,7 +43,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks._common import write_results
+from benchmarks._common import state_matrix_modes, write_results
 from cappe.estimate import AutomatedIdentification, ParameterSpace, least_squares_fit
 from cappe.estimate._exact_modal import ExactModalProblem
 from cappe.estimate._plan import PlanCandidates, plan_test
@@ -164,23 +164,14 @@ class _Rehearsal:
 
 def _generator_modes(nm: NumericModel, truth: dict[str, float], position: dict[str, float], all_sensors: list[str],
                      sensors: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The 25 lowest complex modes from numpy's eig of [[0, I], [-M^-1 (K + iH), -M^-1 (C + G)]], those the
+    """The 25 lowest complex modes of the state matrix (benchmarks._common.state_matrix_modes), those the
     plan's channels see (largest component at least 0.05 of the largest over every candidate channel)."""
-    mats = nm.matrices(truth, position)
-    n = mats["M"].shape[0]
-    minv = np.linalg.inv(mats["M"])
-    state = np.zeros((2 * n, 2 * n), dtype=complex)
-    state[:n, n:] = np.eye(n)
-    state[n:, :n] = -minv @ (mats["K"] + 1j * mats["H"])
-    state[n:, n:] = -minv @ (mats["C"] + mats["G"])
-    lam, vec = np.linalg.eig(state)
-    upper = np.flatnonzero((lam.imag > 0) & (np.abs(lam) > 1e-6 * np.abs(lam).max()))
-    upper = upper[np.argsort(np.abs(lam[upper]))][:25]
+    lam, vec = state_matrix_modes(nm.matrices(truth, position), 25)
     labels, rows = nm.sensor_matrix(truth, position)
-    every = np.asarray(rows)[[labels.index(s) for s in all_sensors]] @ vec[:n, upper]
-    mine = np.asarray(rows)[[labels.index(s) for s in sensors]] @ vec[:n, upper]
+    every = np.asarray(rows)[[labels.index(s) for s in all_sensors]] @ vec
+    mine = np.asarray(rows)[[labels.index(s) for s in sensors]] @ vec
     seen = np.max(np.abs(mine), axis=0) >= 0.05 * np.max(np.abs(every), axis=0)
-    lam = lam[upper][seen]
+    lam = lam[seen]
     return np.abs(lam) / (2 * np.pi), -lam.real / np.abs(lam), mine[:, seen]
 
 

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from benchmarks._common import RESULTS, write_results
+from benchmarks._common import RESULTS, state_matrix_modes, write_results
 from benchmarks.bench_pipeline import _bare_seconds, _count_eigen_solves
 
 SETTINGS = {"n_gsa": 64, "n_opt": 10}
@@ -45,8 +45,6 @@ N_MODES = 25
 
 def independent_reference(machine: Any, truth: dict[str, float], positions: list[dict[str, float]]) -> Any:
     """Exact complex modes at ``positions`` by scipy's dense ``eig`` of the state matrix (no cappe modal code)."""
-    import scipy.linalg
-
     from cappe.modal import ModalEngine
     from cappe.systems.modal import ModalData, ModalDataSet
 
@@ -56,18 +54,9 @@ def independent_reference(machine: Any, truth: dict[str, float], positions: list
     for position in positions:
         mats = machine.matrices(params, position)
         rows = machine.sensor_matrix(position=position)[1]
-        n = machine.n_dof
-        minv = np.linalg.inv(mats["M"])
-        state = np.zeros((2 * n, 2 * n), dtype=complex)
-        state[:n, n:] = np.eye(n)
-        state[n:, :n] = -minv @ (mats["K"] + 1j * mats["H"])
-        state[n:, n:] = -minv @ (mats["C"] + mats["G"])
-        lam, vec = scipy.linalg.eig(state)
-        upper = np.flatnonzero(lam.imag > 1e-6 * np.abs(lam).max())
-        keep = upper[np.argsort(np.abs(lam[upper]))][:N_MODES]
-        w = np.abs(lam[keep])
-        shapes = rows @ vec[:n, keep]
-        sets.append(ModalDataSet(dict(position), w / (2 * np.pi), -lam[keep].real / w, shapes))
+        lam, vec = state_matrix_modes(mats, N_MODES)
+        w = np.abs(lam)
+        sets.append(ModalDataSet(dict(position), w / (2 * np.pi), -lam.real / w, rows @ vec))
     return ModalData(tuple(labels), tuple(sets), "independent scipy eig")
 
 
