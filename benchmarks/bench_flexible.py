@@ -18,14 +18,11 @@ runs vary by a factor of two, the CPU times by a few tenths).
 from __future__ import annotations
 
 import tempfile
-import time
-from collections.abc import Callable
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
-from benchmarks._common import best, write_results
+from benchmarks._common import best, best_cpu, write_results
 from benchmarks.bench_matrices import chain
 from cappe.modal import ModalEngine
 from cappe.model import NumericModel, StructureBuilder, load_model
@@ -87,16 +84,6 @@ def varying_masses(model: NumericModel, params: np.ndarray, rng: np.random.Gener
         if model.structure.parameter(name).kind in ("mass", "inertia") or name == "s_m":
             out[:, i] = model.nominal[i] * rng.uniform(0.9, 1.1, size=len(out))
     return out
-
-
-def best_cpu(func: Callable[[], Any], repeat: int = 5) -> float:
-    """Shortest CPU time of ``repeat`` calls (s; the engine and the bound run on one thread)."""
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        func()
-        times.append(time.process_time() - t0)
-    return min(times)
 
 
 def machine_params(model: NumericModel, batch: int, rng: np.random.Generator) -> np.ndarray:

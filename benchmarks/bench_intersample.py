@@ -27,23 +27,13 @@ from typing import Any
 import numpy as np
 
 from benchmarks import bench_coverage as cov
-from benchmarks._common import write_results
+from benchmarks._common import best_cpu, write_results
 from cappe.estimate._one_step import OneStepEstimator, _Modes, _TimeModel
 from cappe.model import NumericModel, load_model
 from cappe.parallel import blas_threads
 from cappe.systems.statespace import band_limited_modal_response, band_limited_response
 
 NAMES = ("m1", "m2", "k11", "k12", "k22", "c11", "c12", "c22")
-
-
-def _cpu(func: Any, repeat: int = 5) -> float:
-    """Shortest CPU time of ``repeat`` calls (s): on a shared, loaded machine wall time measures the neighbours."""
-    times = []
-    for _ in range(repeat):
-        t0 = time.process_time()
-        func()
-        times.append(time.process_time() - t0)
-    return min(times)
 
 
 def _per_frequency(self: _TimeModel, modes: _Modes, u: np.ndarray, delay: float) -> np.ndarray:
@@ -73,8 +63,8 @@ def _simulation_rows(nm: NumericModel) -> list[dict[str, Any]]:
     for label, c22 in (("truth", 2.0), ("lightly damped", 0.05)):
         p = np.array([{**cov.TRUTH, "c22": c22}[n] for n in NAMES])
         modes = sim.modes(p, np.ones(2))
-        before = _cpu(lambda m=modes: _per_frequency(sim, m, u, 0.3), 10)
-        after = _cpu(lambda m=modes: _modal(sim, m, u, 0.3), 10)
+        before = best_cpu(lambda m=modes: _per_frequency(sim, m, u, 0.3), 10)
+        after = best_cpu(lambda m=modes: _modal(sim, m, u, 0.3), 10)
         a, b = _per_frequency(sim, modes, u, 0.3), _modal(sim, modes, u, 0.3)
         rows.append({"case": f"simulation, 8000 samples, {label}", "before_s": before, "after_s": after,
                      "speedup": before / after, "max_difference_relative": float(np.abs(a - b).max()
