@@ -74,6 +74,63 @@ def test_consider_covariance_matches_a_monte_carlo_of_disturbed_fits():
     assert "consider" in out.diagnostics["uncertainty"]["std"]
 
 
+def test_correlation_is_that_of_the_widened_covariance():
+    """The correlation stored with the widened intervals is that of the covariance they come from: it matches the
+    correlation of the Monte Carlo estimates (dominated by the known parameters' common error), and with it and
+    the standard errors the covariance's diagonal is std^2. The input's correlation (identity here) is not kept.
+    The known parameters' effect lies (nearly) in the unknowns' span, as a mass error is absorbed by stiffnesses:
+    the residuals stay at the noise, so the scatter part is small and the Monte Carlo is the reference."""
+    x_u, _ = _design()
+    mix = np.array([[0.5, -0.3], [0.2, 0.8], [-0.4, 0.1]])
+    x_k = x_u @ mix + 0.02 * np.random.default_rng(11).standard_normal((x_u.shape[0], KNOWN.size))
+    groups = np.repeat(np.arange(N_CLUSTERS), PER_CLUSTER)
+    rng = np.random.default_rng(5)
+    tolerance = dict(zip(("ka", "kb"), TOLERANCE, strict=True))
+    estimates, out = [], None
+    for _ in range(400):
+        est, ju, r = _disturbed_fit(x_u, x_k, rng)
+        out = robust_uncertainty(est, ju, r, groups, known_tolerance=tolerance, known_jacobian=x_k / NOISE,
+                                 known_values=KNOWN)
+        estimates.append(est.values)
+    assert out is not None
+    sampled = np.corrcoef(np.array(estimates).T)
+    assert np.max(np.abs(sampled - np.eye(3))) > 0.5  # the known parameters correlate the unknowns strongly
+    # 400 draws: a correlation's sampling error is below (1 - rho^2) / sqrt(400) = 0.05
+    np.testing.assert_allclose(out.correlation, sampled, atol=0.1)
+    np.testing.assert_allclose(np.diag(out.correlation), 1.0)
+    np.testing.assert_allclose(out.correlation, out.correlation.T)
+    assert np.all(np.linalg.eigvalsh(out.correlation) > -1e-12)  # a correlation matrix: positive semi-definite
+    gain = np.array(list(out.diagnostics["uncertainty"]["known"]["gain"].values())).T  # (n, n_k)
+    np.testing.assert_allclose(np.sqrt((gain**2) @ TOLERANCE**2) * np.abs(out.values),
+                               out.diagnostics["uncertainty"]["known"]["std_from_known"], rtol=1e-12)
+
+
+def test_correlation_without_known_parameters_is_the_sandwich_one_at_the_larger_std():
+    """Without known parameters the correlation still belongs to the covariance of the reported std (the
+    sandwich's, with clustered residuals); an undetermined parameter's row stays nan."""
+    x_u, _ = _design()
+    groups = np.repeat(np.arange(N_CLUSTERS), PER_CLUSTER)
+    rng = np.random.default_rng(2)
+    y = x_u @ THETA + np.repeat(rng.standard_normal(N_CLUSTERS), PER_CLUSTER) * NOISE  # clustered errors
+    theta, *_ = np.linalg.lstsq(x_u, y, rcond=None)
+    r = (x_u @ theta - y) / NOISE
+    ju = x_u / NOISE
+    std = np.array([1e-6, 1e-6, np.nan])  # tiny model-based std: the sandwich's is the larger one
+    corr = np.array([[1.0, 0.0, np.nan], [0.0, 1.0, np.nan], [np.nan, np.nan, 1.0]])
+    est = ParameterEstimate("t", ("a", "b", "c"), theta, std, np.full((3, 2), np.nan), corr,
+                            np.array([True, True, False]))
+    out = robust_uncertainty(est, ju, r, groups)
+    jr = ju * theta[None, :]
+    bread = np.linalg.inv(jr.T @ jr)
+    scores = np.stack([jr[groups == c].T @ r[groups == c] for c in range(N_CLUSTERS)])
+    cov = bread @ scores.T @ scores @ bread
+    expected = cov[0, 1] / np.sqrt(cov[0, 0] * cov[1, 1])
+    assert abs(expected) > 0.05
+    np.testing.assert_allclose(out.correlation[0, 1], expected, rtol=1e-9)
+    assert np.isnan(out.correlation[0, 2])
+    assert np.isnan(out.correlation[2, 1])
+
+
 def test_zero_tolerance_leaves_the_intervals_as_they_were():
     x_u, x_k = _design()
     groups = np.repeat(np.arange(N_CLUSTERS), PER_CLUSTER)

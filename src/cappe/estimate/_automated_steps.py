@@ -455,6 +455,11 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     ``G dk``, ``G = -(J_u^T J_u)^+ J_u^T J_k`` (both Jacobians by relative changes, weighted like the residuals),
     so the unknowns' relative covariance gains ``G diag(tol^2) G^T``, added to the larger of the two above.
 
+    The returned ``correlation`` is that of the covariance the standard errors come from: the scatter part
+    ``D R D`` (``D`` the larger of the two standard errors, ``R`` the sandwich's correlation, the model-based one
+    where there are too few clusters) plus the consider part, so its diagonal is ``std^2`` and the correlations
+    the known parameters' common error induces (two stiffnesses scaled together by one mass) show in it.
+
     Parameters
     ----------
     estimate : ParameterEstimate
@@ -477,7 +482,10 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     Returns
     -------
     ParameterEstimate
-        ``std`` and ``ci95`` replaced; ``diagnostics["uncertainty"]`` says how they were formed.
+        ``std``, ``ci95`` and ``correlation`` replaced; ``diagnostics["uncertainty"]`` says how they were formed
+        (with ``known_tolerance``, its ``"known"`` entry: the standard errors without the known parameters, their
+        part, the widening per unknown and ``gain``, the unknowns' relative change per relative change of each
+        known parameter).
     """
     from scipy import stats
 
@@ -487,6 +495,7 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     labels = np.unique(groups)
     g = labels.size
     std_rel = np.asarray(estimate.std, dtype=float) / np.abs(p)
+    corr = np.asarray(estimate.correlation, dtype=float)
     how = "model-based s^2 (J^T J)^-1"
     dof = max(int(residuals.size) - n, 1)
     if g > n + 1:
@@ -495,13 +504,20 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         cov = bread @ (scores.T @ scores) @ bread * (g / (g - n))
         sandwich = np.sqrt(np.clip(np.diag(cov), 0.0, None))
         std_rel = np.where(np.isfinite(std_rel), np.maximum(std_rel, sandwich), std_rel)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            robust = cov / np.outer(sandwich, sandwich)
+        corr = np.where(np.isfinite(robust), robust, corr)
         how = f"larger of model-based and cluster-robust sandwich over {g} {clusters}"
         dof = g - 1
+    determined = np.isfinite(std_rel)
+    scale = np.where(determined, std_rel, 0.0)
+    cov_rel = np.where(np.outer(determined, determined), np.nan_to_num(corr, nan=0.0), 0.0) * np.outer(scale, scale)
     considered: dict[str, Any] | None = None
     if known_tolerance:
         tol = np.array([float(v) for v in known_tolerance.values()])
         jk = np.asarray(known_jacobian, dtype=float) * np.asarray(known_values, dtype=float)[None, :]
         gain = -np.linalg.pinv(jr.T @ jr, rcond=1e-12, hermitian=True) @ (jr.T @ jk)  # (n, n_k)
+        cov_rel = cov_rel + (gain * tol**2) @ gain.T
         consider = np.sqrt(np.einsum("ik,k,ik->i", gain, tol**2, gain))
         before = std_rel
         std_rel = np.sqrt(std_rel**2 + consider**2)
@@ -512,7 +528,13 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
         considered = {"parameters": dict(known_tolerance.items()), "tolerance": "relative standard deviation",
                       "std_without": (before * np.abs(p)).tolist(), "std_from_known": (consider * np.abs(p)).tolist(),
                       "widening": factor.tolist(), "largest_widening": float(factor[worst]),
-                      "largest_widening_parameter": estimate.names[worst]}
+                      "largest_widening_parameter": estimate.names[worst],
+                      "gain": {k: gain[:, i].tolist() for i, k in enumerate(known_tolerance)}}
+    with np.errstate(divide="ignore", invalid="ignore"):
+        correlation = cov_rel / np.outer(std_rel, std_rel)
+    # nan where a parameter is not determined (as jacobian_uncertainty has it); 0 beside a zero standard error
+    correlation = np.where(np.outer(determined, determined), np.nan_to_num(correlation, nan=0.0), np.nan)
+    np.fill_diagonal(correlation, 1.0)
     t = float(stats.t.ppf(0.975, dof))
     std = std_rel * np.abs(p)
     positive = p > 0
@@ -524,7 +546,7 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     diag = {**estimate.diagnostics,
             "uncertainty": {"std": how, "ci95": f"log scale, Student t with {dof} degrees of freedom",
                             "clusters": int(g), **({"known": considered} if considered else {})}}
-    return replace(estimate, std=std, ci95=ci, diagnostics=diag)
+    return replace(estimate, std=std, ci95=ci, correlation=correlation, diagnostics=diag)
 
 
 #: Pairs with a MACXP below this are reported.
