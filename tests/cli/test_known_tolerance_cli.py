@@ -97,3 +97,44 @@ def test_text_says_whether_the_intervals_include_the_known_parameters(files, cap
 def test_the_note_is_absent_where_no_parameter_is_tagged(files, capsys):
     assert cli(["identify", str(files["plain"]), "--reference", str(files["ref"]), *BASE]) == 0
     assert "assume the known parameters exact" not in capsys.readouterr().out
+
+
+def test_a_negligible_scatter_does_not_print_a_factor_of_millions(files, capsys):
+    """An exact, noise-free reference leaves the fit almost no scatter: the widening factor (millions) is printed
+    as "more than 1000 x", with the standard error before and after, never as a number like 6.47e+06."""
+    assert cli(["identify", str(files["tagged"]), "--reference", str(files["ref"]), *BASE,
+                "--known-tolerance", "0.1", "--json"]) == 0
+    known = json.loads(capsys.readouterr().out)["diagnostics"]["uncertainty"]["known"]
+    assert known["largest_widening"] > 1e4  # the case this test is about (the JSON keeps the number)
+    assert cli(["identify", str(files["tagged"]), "--reference", str(files["ref"]), *BASE,
+                "--known-tolerance", "0.1"]) == 0
+    row = next(r for r in capsys.readouterr().out.splitlines() if "known parameters' uncertainty" in r)
+    assert "up to more than 1000 x wider" in row
+    assert "e+" not in row, row
+    assert f"({known['largest_widening_parameter']}: std " in row
+    assert " % -> " in row
+
+
+def test_every_text_output_says_the_intervals_assume_the_known_parameters_exact(files):
+    """The note comes with the summary every text output prints (cappe identify, cappe demo, the Python API's
+    summary_text), not only with cappe identify's; it names those left out when only some are given a tolerance;
+    the JSON lists them."""
+    from cappe.cli.identify import summary_text
+    from cappe.estimate import AutomatedIdentification
+    from cappe.io import read_modal_data
+
+    model = load_model(files["tagged"])
+    reference = read_modal_data(files["ref"])
+    settings = {"n_gsa": 8, "n_opt": 2, "n_workers": 1, "n_permutations": 0, "validation": None, "rng": 0}
+    result = AutomatedIdentification(model, **settings).fit(reference).result_
+    text = summary_text(result, None, model.name)
+    note = [row for row in text.splitlines() if "assume the known parameters exact" in row]
+    assert note == ["note: the intervals assume the known parameters exact (2 tagged disturbable); "
+                    "--known-tolerance REL includes their uncertainty"]
+    assert result.estimate.diagnostics["known_assumed_exact"] == ["mb", "mt"]
+
+    partial = AutomatedIdentification(model, known_tolerance={"mt": 0.05}, **settings).fit(reference).result_
+    text = summary_text(partial, None, model.name)
+    assert "assume 1 more known parameter exact that the model tags disturbable (mb)" in text
+    assert "including 1 known parameter's uncertainty (relative std 5 %" in text
+    assert partial.estimate.diagnostics["known_assumed_exact"] == ["mb"]

@@ -327,10 +327,6 @@ def run(args: argparse.Namespace) -> int:
                           model=structure, run=_run_record(args))
         doc["diagnostics"]["report"] = args.report
     text = summary_text(result, truth, structure.name)
-    exact_knowns = [p.name for p in structure.parameters if p.disturbable and p.name not in unknowns]
-    if not tolerance and exact_knowns:
-        text += (f"\nnote: the intervals assume the known parameters exact ({len(exact_knowns)} tagged disturbable); "
-                 "--known-tolerance REL includes their uncertainty")
     if args.report:
         text += f"\nreport written to {args.report}"
     if args.out:
@@ -371,14 +367,10 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     elif joint.uncertainty is not None:
         lines.append(f"uncertainty: {joint.uncertainty}; 95 % intervals on a log scale; residuals "
                      f"weighted by {joint.weighting or 'the weights'}, {joint.shapes or 'complex'} shapes")
-    known = joint.estimate.diagnostics.get("uncertainty", {}).get("known")
+    known = estimate.diagnostics.get("uncertainty", {}).get("known")
     if known:
-        tol = sorted(set(known["parameters"].values()))
-        level = " or ".join(f"{100 * v:.3g} %" for v in tol[:3]) + (" ..." if len(tol) > 3 else "")
-        lines.append(f"  including {len(known['parameters'])} known parameters' uncertainty (relative std {level}, "
-                     f"consider covariance): intervals up to {known['largest_widening']:.3g} x wider "
-                     f"({_widest(joint.estimate, known)})"
-                     + ("; not in the FRF refinement's intervals above" if frf is not None else ""))
+        lines.append(_known_line(estimate, known))
+    lines += _assumed_exact_note(result)
     val = result.validation
     if val.held is not None:
         lines += _row_stats(f"validation at {_where(val.held.position)}", val.held.statistics())
@@ -406,12 +398,46 @@ def summary_text(result: AutomatedResult, truth: dict[str, float] | None, model_
     return "\n".join(lines)
 
 
+#: A widening beyond this is printed as "more than" it: the fit's own scatter is then negligible (an exact,
+#: noise-free reference gives factors of millions that mean nothing to a reader).
+WIDENING_SHOWN = 1000.0
+
+
+def _known_line(estimate: ParameterEstimate, known: dict[str, Any]) -> str:
+    """The line saying which known parameters' uncertainty the intervals include and how much it widens them."""
+    tol = sorted(set(known["parameters"].values()))
+    level = " or ".join(f"{100 * v:.3g} %" for v in tol[:3]) + (" ..." if len(tol) > 3 else "")
+    factor = float(known["largest_widening"])
+    if factor <= WIDENING_SHOWN:
+        wider = f"intervals up to {factor:.3g} x wider"
+    else:
+        wider = f"intervals up to more than {WIDENING_SHOWN:g} x wider: the fit's own scatter is negligible beside it"
+    count = len(known["parameters"])
+    whose = "parameters'" if count > 1 else "parameter's"
+    return (f"  including {count} known {whose} uncertainty (relative std {level}, "
+            f"consider covariance): {wider} ({_widest(estimate, known)})")
+
+
 def _widest(estimate: ParameterEstimate, known: dict[str, Any]) -> str:
     """The unknown whose interval the known parameters widen most, with its relative std without and with them."""
     name = known["largest_widening_parameter"]
     k = list(estimate.names).index(name)
     value = abs(float(estimate.values[k]))
-    return f"{name}: std {100 * known['std_without'][k] / value:.3g} % -> {100 * float(estimate.std[k]) / value:.3g} %"
+    return f"{name}: std {100 * known['std_without'][k] / value:.2g} % -> {100 * float(estimate.std[k]) / value:.3g} %"
+
+
+def _assumed_exact_note(result: AutomatedResult) -> list[str]:
+    """A note where the intervals take known parameters as exact that the model tags disturbable."""
+    exact = list(result.known_assumed_exact)
+    if not exact:
+        return []
+    if not result.settings.known_tolerance:
+        return [f"note: the intervals assume the known parameters exact ({len(exact)} tagged disturbable); "
+                "--known-tolerance REL includes their uncertainty"]
+    listed = ", ".join(exact[:6]) + (" ..." if len(exact) > 6 else "")
+    more = f"{len(exact)} more known parameter{'s' if len(exact) > 1 else ''}"
+    return [f"note: the intervals assume {more} exact that the model tags disturbable ({listed}); "
+            "--known-tolerance REL or NAME=REL includes that uncertainty too"]
 
 
 def _run_record(args: argparse.Namespace) -> dict[str, Any]:

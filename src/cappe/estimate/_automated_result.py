@@ -449,6 +449,9 @@ class AutomatedResult:
     cpu_timings : mapping step -> float
         CPU seconds of this process per step and ``total`` (every thread of the process counted: with one BLAS
         thread the work a step costs, whatever the load of the machine).
+    known_assumed_exact : tuple of str
+        Known parameters the model tags ``disturbable`` (they may be off, paper 3.3) that were given no tolerance:
+        the intervals take them as exact (every text output says so).
     """
 
     method: str
@@ -469,6 +472,7 @@ class AutomatedResult:
     warnings: tuple[str, ...]
     frf: FRFRefinement | None = None
     cpu_timings: Mapping[str, float] = field(default_factory=dict)
+    known_assumed_exact: tuple[str, ...] = ()
 
     @property
     def costs(self) -> dict[str, float | None]:
@@ -507,6 +511,7 @@ class AutomatedResult:
             "cpu_timings": dict(self.cpu_timings),
             "validation": self.validation.to_dict(),
             "warnings": list(self.warnings),
+            "known_assumed_exact": list(self.known_assumed_exact),
         }
 
     @functools.cached_property

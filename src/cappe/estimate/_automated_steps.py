@@ -137,6 +137,9 @@ def run_pipeline(setup: Setup, rng: np.random.Generator) -> AutomatedResult:
     caught.extend(f"IdentificationWarning: {line}"
                   for line in identification_warnings(setup, joint, validation, frf))
     data = setup.data
+    structure, considered = setup.model.structure, setup.settings.known_tolerance or {}
+    exact_knowns = tuple(p.name for p in structure.parameters
+                         if p.disturbable and p.name not in setup.space.names and p.name not in considered)
     return AutomatedResult(
         method=setup.method, names=setup.space.names, stiffness_unknowns=tuple(setup.modal_unknowns),
         damping_unknowns=tuple(setup.damping_unknowns),
@@ -144,7 +147,7 @@ def run_pipeline(setup: Setup, rng: np.random.Generator) -> AutomatedResult:
         validation_position=None if setup.held is None else dict(data.sets[setup.held].position),
         settings=setup.settings, gsa=gsa, stiffness=search, refinement=refinement, damping=damping,
         after_damping=current, joint=joint, validation=validation, timings=timings, warnings=tuple(caught), frf=frf,
-        cpu_timings=cpu)
+        cpu_timings=cpu, known_assumed_exact=exact_knowns)
 
 
 # -- step 1 -----------------------------------------------------------------------------------------------------
