@@ -116,7 +116,9 @@ def test_frf_refinement_brings_damping_within_target(chain, tmp_path, capsys):
     assert max(_damping_errors(modal_only).values()) > 0.25, _damping_errors(modal_only)
 
     frf = [str(chain / f"z{k}.uff") for k in range(3)]
-    code, doc, _ = _identify(chain, tmp_path, "--frf", *frf, "--report", str(tmp_path / "r.html"))
+    # a known mass given a 1 % tolerance: the final (FRF) intervals include it
+    code, doc, _ = _identify(chain, tmp_path, "--frf", *frf, "--report", str(tmp_path / "r.html"),
+                             "--known-tolerance", "mt=0.01")
     out = capsys.readouterr()
     # the report's run record names every file the run read: the reference files one by one, the FRFs, the map
     page = (tmp_path / "r.html").read_text()
@@ -137,6 +139,11 @@ def test_frf_refinement_brings_damping_within_target(chain, tmp_path, capsys):
     assert "chi2/dof" in out.out
     assert "sandwich over" in out.out
     assert "fitted lines at one position" in out.out
+    assert "consider covariance of the known parameters" in doc["diagnostics"]["uncertainty"]["std"]
+    assert doc["diagnostics"]["uncertainty"]["known"]["parameters"] == {"mt": 0.01}
+    including = [row for row in out.out.splitlines() if "known parameter's uncertainty" in row]
+    assert len(including) == 1
+    assert "not in the FRF refinement" not in including[0]
     # the held-out position: FRAC and CSF against its measured FRFs, in the text
     assert doc["diagnostics"]["validation"]["validation"]["frf_source"] == "measured FRFs"
     assert "FRAC and CSF against the measured FRFs" in out.out
@@ -265,3 +272,73 @@ def test_validation_against_measured_frfs():
     bad = validate_identification(model=machine, params={**TRUTH, "me_kx": 1.3 * TRUTH["me_kx"]}, reference=ref,
                                   measured=data)
     assert bad.statistics()["frac"]["worst"] < good.statistics()["frac"]["worst"] - 0.2
+
+
+def test_known_tolerance_reaches_the_frf_refinement():
+    """A known mass off by 5 % (FRFs from the independent generator at the disturbed mass, 0.2 % noise): the FRF
+    refinement's estimate moves by the first-order shift its consider covariance predicts (``gain`` times 5 %,
+    from the FRF residuals' analytic derivatives by the known mass), and the intervals that include
+    ``known_tolerance`` cover the truth where those without it miss."""
+    from scipy import stats
+
+    from cappe.estimate._frf_refinement import refine_against_frf
+
+    machine = NumericModel(load_model(MODEL))
+    space = ParameterSpace.from_model(machine, list(TRUTH), start=TRUTH)
+    disturbed = {**TRUTH, "mt": 1.05 * machine.structure.nominal["mt"]}
+    rng = np.random.default_rng(4)
+    labels = tuple(f"{s}:{d}" for s in SENSORS for d in "xyz")
+    measured, reference = [], []
+    exact = ModalEngine(machine).modal_data([{"z": z} for z in POSITIONS], params=TRUTH)
+    for z, data_set in zip(POSITIONS, exact.sets, strict=True):
+        acc = accelerance(machine, disturbed, z)
+        noisy = acc * (1 + 0.002 * (rng.standard_normal(acc.shape) + 1j * rng.standard_normal(acc.shape)) / 2**0.5)
+        data = FRFData(LINES, noisy, tuple(f"{n}:{d}" for n, d in REFERENCES), labels, ("acceleration",) * 18)
+        measured.append(MeasuredFRF({"z": z}, data, f"z{z}.uff"))
+        keep = data_set.frequency < 600.0
+        reference.append(type(data_set)(data_set.position, data_set.frequency[keep], data_set.damping[keep],
+                                        data_set.shapes[:, keep]))
+    truth = np.array([TRUTH[n] for n in space.names])
+    fit = refine_against_frf(method="t", model=machine, space=space, measured=measured, reference=reference,
+                             start=truth, known_tolerance={"mt": 0.05})
+    known = fit.estimate.diagnostics["uncertainty"]["known"]
+    assert known["parameters"] == {"mt": 0.05}
+    shift = fit.values / truth - 1
+    error = 1 / 1.05 - 1  # the error of the value the fit uses (nominal / true - 1)
+    predicted = error * np.array(known["gain"]["mt"])
+    scatter = np.array(known["std_without"]) / fit.values
+    moved = np.abs(predicted) > 3 * scatter
+    assert np.count_nonzero(moved) >= 4, predicted / scatter
+    # first order in a 5 % change: the second-order rest is a few per cent of the shift (6 % at most here)
+    np.testing.assert_allclose(shift[moved], predicted[moved], rtol=0.15)
+    ci = fit.estimate.ci95
+    assert np.all((ci[:, 0] <= truth) & (truth <= ci[:, 1]))
+    dof = int(fit.estimate.diagnostics["uncertainty"]["ci95"].split(" with ")[1].split()[0])
+    half = stats.t.ppf(0.975, dof) * scatter
+    covered_without = np.abs(np.log(truth / fit.values)) <= half
+    assert np.count_nonzero(~covered_without) >= 4  # without the known mass's tolerance the intervals miss
+
+
+def test_a_known_parameter_that_moves_a_sensor_cannot_be_considered(tmp_path):
+    """The FRF derivatives leave out a sensor row's change: a known length that places a sensor, given a
+    tolerance, is refused with the parameter named (as an unknown that moves one is). The pipeline's modal engine
+    refuses such a model earlier; refine_against_frf can be called on its own."""
+    from cappe.estimate._frf_refinement import refine_against_frf
+    from cappe.exceptions import ModelError
+
+    text = MODEL.read_text().replace("  - {name: bsd_bz,", "  - {name: hs, value: 0.1, unit: m, kind: length}\n"
+                                     "  - {name: bsd_bz,")
+    text = text.replace("{name: tool, body: table, point: [0.0, 0.1, 0.0]}", "{name: tool, body: table, "
+                        "point: [0.0, hs, 0.0]}")
+    (tmp_path / "moving.yaml").write_text(text)
+    machine = NumericModel(load_model(tmp_path / "moving.yaml"))
+    space = ParameterSpace.from_model(machine, list(TRUTH), start=TRUTH)
+    labels = tuple(f"{s}:{d}" for s in SENSORS for d in "xyz")
+    data = FRFData(LINES, accelerance(machine, TRUTH, 0.0), tuple(f"{n}:{d}" for n, d in REFERENCES), labels,
+                   ("acceleration",) * 18)
+    # the same modes (the sensor at its nominal place): the modal engine refuses sensors that move with parameters
+    ref = ModalEngine(NumericModel(load_model(MODEL))).modal_data([{"z": 0.0}], params=TRUTH).sets[0]
+    truth = np.array([TRUTH[n] for n in space.names])
+    with pytest.raises(ModelError, match=r"move with the known parameters given a tolerance \['hs'\]"):
+        refine_against_frf(method="t", model=machine, space=space, measured=[MeasuredFRF({"z": 0.0}, data, "a")],
+                           reference=[ref], start=truth, known_tolerance={"mb": 0.1, "hs": 0.01})

@@ -154,9 +154,9 @@ class AutomatedIdentification(Estimator):
     known_tolerance : mapping name -> float, optional
         Relative standard deviation (0.1: 10 %) of known parameters whose error the 95 % intervals should include
         (consider covariance, :func:`~cappe.estimate._automated_steps.robust_uncertainty`; exact-mode refinement
-        only). An error bounded by +-REL (uniform, or +-REL with a random sign as in the disturbed case) has a
-        standard deviation of at most REL, so REL itself is a safe value. Without it the intervals assume the
-        known parameters exact.
+        only, and the refinement against measured FRFs after it). An error bounded by +-REL (uniform, or +-REL
+        with a random sign as in the disturbed case) has a standard deviation of at most REL, so REL itself is a
+        safe value. Without it the intervals assume the known parameters exact.
     **deprecated
         ``truth``, ``overlay`` and ``progress``: arguments of :meth:`fit` since cappe 0.1 (they do not shape the
         estimate; they say what one run validates against, which FRF it keeps and whether it shows progress).

@@ -431,10 +431,11 @@ def pairing_candidates(model: NumericModel, reference: ModalData, full: NDArray[
 def frf_refinement_step(setup: Setup, start: Array) -> FRFRefinement:
     """All unknowns fitted to the measured FRFs at the identification positions, from the modal stages' estimate
     (:mod:`cappe.estimate._frf_refinement`): the modal stages find the basin, the FRFs settle what extracted modes
-    cannot (issue 20)."""
+    cannot (issue 20). Its intervals include the known parameters' tolerance as the joint refinement's do."""
     pairs = [(item, setup.data.sets[k]) for k in setup.ident if (item := setup.measured_at(k)) is not None]
     return refine_against_frf(method=setup.method, model=setup.model, space=setup.space,
-                              measured=[m for m, _ in pairs], reference=[s for _, s in pairs], start=start)
+                              measured=[m for m, _ in pairs], reference=[s for _, s in pairs], start=start,
+                              known_tolerance=setup.settings.known_tolerance)
 
 
 def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: Array,
@@ -454,9 +455,10 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
 
     Both reflect the residuals' scatter only. An error of a known parameter shifts every cluster alike, so it
     does not show there; with ``known_tolerance`` the known parameters are "consider parameters"
-    (Schmidt-Kalman): a relative error ``dk`` of them moves the least-squares estimate by
-    ``G dk``, ``G = -(J_u^T J_u)^+ J_u^T J_k`` (both Jacobians by relative changes, weighted like the residuals),
-    so the unknowns' relative covariance gains ``G diag(tol^2) G^T``, added to the larger of the two above.
+    (Schmidt-Kalman): a relative error ``dk`` of the values used (used / true - 1) moves the least-squares
+    estimate by ``G dk``, ``G = -(J_u^T J_u)^+ J_u^T J_k`` (both Jacobians by relative changes, weighted like the
+    residuals), so the unknowns' relative covariance gains ``G diag(tol^2) G^T``, added to the larger of the two
+    above.
 
     The returned ``correlation`` is that of the covariance the standard errors come from: the scatter part
     ``D R D`` (``D`` the larger of the two standard errors, ``R`` the sandwich's correlation, the model-based one
@@ -487,8 +489,8 @@ def robust_uncertainty(estimate: ParameterEstimate, jacobian: Array, residuals: 
     ParameterEstimate
         ``std``, ``ci95`` and ``correlation`` replaced; ``diagnostics["uncertainty"]`` says how they were formed
         (with ``known_tolerance``, its ``"known"`` entry: the standard errors without the known parameters, their
-        part, the widening per unknown and ``gain``, the unknowns' relative change per relative change of each
-        known parameter).
+        part, the widening per unknown and ``gain``: per known parameter, the unknowns' first-order relative
+        shift per relative error of the value used, ``G``).
     """
     from scipy import stats
 

@@ -39,7 +39,9 @@ within its half-power band and the flanks and the stretches between modes more s
 the channels of one line are correlated in practice (spectral leakage and windows, the common force signal of an
 H1 estimate, model error around one mode), so the reported standard error is the larger of the model-based one and
 a cluster-robust sandwich over blocks of consecutive lines at one position, all channels together
-(:func:`~cappe.estimate._automated_steps.robust_uncertainty`), with 95 % intervals on a log scale.
+(:func:`~cappe.estimate._automated_steps.robust_uncertainty`), with 95 % intervals on a log scale. Known parameters
+given a tolerance (``--known-tolerance``) add their consider covariance there, from the same residuals' derivatives
+by those parameters (:meth:`FRFRefinementProblem.jacobian` with ``parameters``).
 """
 
 from __future__ import annotations
@@ -286,20 +288,40 @@ class FRFRefinementProblem:
         self.space = space
         self.positions: list[_Position] = []
         self.noise = ""
-        labels, rows0 = model.sensor_matrix(space.full(space.start))
-        moved = []
-        for k, name in enumerate(space.names):
-            p = space.full(space.start)
-            p[space.columns[k]] *= 1.5
-            if not np.array_equal(model.sensor_matrix(p)[1], rows0):
-                moved.append(name)
-        if moved:
-            msg = f"sensor points of model '{model.structure.name}' move with the unknowns {moved}; the FRF " \
-                  "refinement needs them fixed"
-            raise ModelError(msg)
+        labels = model.sensor_matrix(space.full(space.start))[0]
+        self.refuse_moving_sensors(space.names, "unknowns")
         for item, data_set in zip(measured, reference, strict=True):
             self.positions.append(self._prepare(item, data_set, set(labels)))
         self.evaluations = 0
+
+    def refuse_moving_sensors(self, names: Sequence[str], what: str) -> None:
+        """Raise if a sensor point moves with one of the model parameters ``names``: the FRF derivatives leave the
+        sensor rows' change out.
+
+        Parameters
+        ----------
+        names : sequence of str
+            Model parameters (unknowns, or known ones whose uncertainty the intervals consider).
+        what : str
+            What they are, for the message.
+
+        Raises
+        ------
+        ModelError
+            Naming the parameters that move a sensor point.
+        """
+        base = self.space.full(self.space.start)
+        rows0 = self.model.sensor_matrix(base)[1]
+        moved = []
+        for name in names:
+            p = base.copy()
+            p[self.model.parameter_names.index(name)] *= 1.5
+            if not np.array_equal(self.model.sensor_matrix(p)[1], rows0):
+                moved.append(name)
+        if moved:
+            msg = f"sensor points of model '{self.model.structure.name}' move with the {what} {moved}; the FRF " \
+                  "refinement needs them fixed"
+            raise ModelError(msg)
 
     def _prepare(self, item: MeasuredFRF, data_set: ModalDataSet, labels: set[str]) -> _Position:
         frf, where = item.data, item.where()
@@ -351,11 +373,11 @@ class FRFRefinementProblem:
         """Number of real residuals."""
         return int(sum(2 * np.count_nonzero(p.mask) for p in self.positions))
 
-    def _at(self, p: Array, pos: _Position, derivatives: bool) -> tuple[CArray, CArray]:
+    def _at(self, p: Array, pos: _Position, columns: Sequence[int] | None) -> tuple[CArray, CArray]:
         full = self.space.full(p)
         try:
             return model_frf(self.model, full, pos.position, pos.freq, pos.outputs, pos.inputs, pos.orders.tolist(),
-                             self.space.columns.tolist() if derivatives else None)
+                             columns)
         except np.linalg.LinAlgError as exc:
             msg = f"dynamic stiffness is singular at a fitted line of {pos.source}"
             raise ModelError(msg) from exc
@@ -375,7 +397,7 @@ class FRFRefinementProblem:
         self.evaluations += 1
         out = []
         for pos in self.positions:
-            h = self._at(np.asarray(p, dtype=float), pos, False)[0]
+            h = self._at(np.asarray(p, dtype=float), pos, None)[0]
             with np.errstate(divide="ignore", invalid="ignore"):
                 ell = np.log(h[pos.mask]) - pos.log_meas[pos.mask]
             err = ell.real + 1j * np.angle(np.exp(1j * ell.imag))  # phase error wrapped to (-pi, pi]
@@ -383,21 +405,28 @@ class FRFRefinementProblem:
             out.append(np.concatenate([w * err.real, w * err.imag]))
         return np.concatenate(out)
 
-    def jacobian(self, p: Array) -> Array:
+    def jacobian(self, p: Array, parameters: Sequence[str] | None = None) -> Array:
         """``d residuals / d p`` (SI), from the analytic FRF derivatives ``dH/dp / H``.
 
         Parameters
         ----------
         p : ndarray, shape (space.n,)
             The unknowns in SI units.
+        parameters : sequence of str, optional
+            Model parameters to differentiate by instead of the unknowns, e.g. known ones whose uncertainty the
+            intervals consider (:func:`~cappe.estimate._automated_steps.robust_uncertainty`); default the unknowns.
+            Sensor points must not move with them (:meth:`refuse_moving_sensors`).
 
         Returns
         -------
-        ndarray, shape (n_residuals, space.n)
+        ndarray, shape (n_residuals, space.n) or (n_residuals, len(parameters))
+            Derivatives of the residuals by the SI parameters (1 / unit of each parameter).
         """
+        columns = (self.space.columns.tolist() if parameters is None
+                   else [self.model.parameter_names.index(n) for n in parameters])
         blocks = []
         for pos in self.positions:
-            h, dh = self._at(np.asarray(p, dtype=float), pos, True)
+            h, dh = self._at(np.asarray(p, dtype=float), pos, columns)
             d = dh[:, pos.mask] / h[pos.mask][None, :]  # (n, n_res)
             w = pos.sqrt_w[pos.mask][None, :]
             blocks.append(np.concatenate([w * d.real, w * d.imag], axis=1).T)
@@ -487,7 +516,7 @@ RESIDUAL_LEVEL = 4.0
 
 def refine_against_frf(*, method: str, model: NumericModel, space: ParameterSpace,
                        measured: Sequence[MeasuredFRF], reference: Sequence[ModalDataSet],
-                       start: Array) -> FRFRefinement:
+                       start: Array, known_tolerance: Mapping[str, float] | None = None) -> FRFRefinement:
     """All unknowns fitted to measured FRFs from ``start`` (the modal stages' estimate), with an honest uncertainty.
 
     Parameters
@@ -504,15 +533,25 @@ def refine_against_frf(*, method: str, model: NumericModel, space: ParameterSpac
         The reference modes at the same positions (they choose band and lines).
     start : ndarray, shape (space.n,)
         Start (SI).
+    known_tolerance : mapping name -> float, optional
+        Relative standard deviation of known parameters whose uncertainty the intervals include (consider
+        covariance, :func:`~cappe.estimate._automated_steps.robust_uncertainty`; 0.1: 10 %).
 
     Returns
     -------
     FRFRefinement
+
+    Raises
+    ------
+    ModelError
+        A sensor point moves with an unknown or with a known parameter given a tolerance.
     """
     from cappe.estimate._automated_steps import robust_uncertainty
     from cappe.estimate._base import least_squares_fit
 
     problem = FRFRefinementProblem(model, space, measured, reference)
+    tolerance = dict(known_tolerance or {})
+    problem.refuse_moving_sensors(list(tolerance), "known parameters given a tolerance")
     p0 = np.clip(np.asarray(start, dtype=float), space.lower, space.upper)
     r0 = problem.residuals(p0)
     fitted = least_squares_fit(method, space, problem.residuals, problem.jacobian, starts=p0[None, :],
@@ -524,8 +563,11 @@ def refine_against_frf(*, method: str, model: NumericModel, space: ParameterSpac
         msg = "the FRF refinement ended at a non-finite estimate"
         raise ModelError(msg)
     r = problem.residuals(values)
-    est = robust_uncertainty(est, problem.jacobian(values), r, problem.groups(),
-                             clusters=f"blocks of {CLUSTER_LINES} fitted lines at one position (all channels)")
+    est = robust_uncertainty(
+        est, problem.jacobian(values), r, problem.groups(),
+        clusters=f"blocks of {CLUSTER_LINES} fitted lines at one position (all channels)", known_tolerance=tolerance,
+        known_jacobian=problem.jacobian(values, list(tolerance)) if tolerance else None,
+        known_values=space.base[[model.parameter_names.index(n) for n in tolerance]])
     cost = float(r @ r)
     dof = max(r.size - space.n, 1)
     chi2 = cost / dof
