@@ -578,14 +578,14 @@ def baseline(args: argparse.Namespace) -> int:
         lines.append(f"  {name:10s} {doc['mean'][name]:8.4f} {100 * doc['std'][name] / doc['mean'][name]:8.4f}")
     lines.append(f"resolution {100 * result.resolution:.2g} % "
                  + ("(given)" if args.resolution is not None else "(derived from the healthy data's own scatter)"))
-    lines += _rate_lines(result.rate_terms, result.rates)
+    lines += _rate_lines(result.rate_terms)
     lines += [f"left out: {why}" for why in result.left_out]
     doc.pop("frf", None)  # the mean FRF is for the dashboard, not the terminal
     emit(args, doc, "\n".join(lines))
     return 0
 
 
-def _rate_lines(terms: dict[str, Any], rates: Any = ()) -> list[str]:
+def _rate_lines(terms: dict[str, Any]) -> list[str]:
     """What the baseline takes from the conditions' rates of change, for people."""
     from cappe.monitor import RATE_GAP
 
@@ -595,11 +595,9 @@ def _rate_lines(terms: dict[str, Any], rates: Any = ()) -> list[str]:
             by_condition.setdefault(condition, []).append(name)
     lines = [f"rate term in use: the expectation of {', '.join(names)} follows the rate of change of {condition} "
              "(per minute, from the previous measurement: a condition sensor that lags); a measurement without a "
-             f"previous one within {RATE_GAP.total_seconds() / 60:g} min is judged at the learned mean rate, with wider uncertainty"
+             f"previous one within {RATE_GAP.total_seconds() / 60:g} min is judged at the learned mean rate, with "
+             "wider uncertainty"
              for condition, names in by_condition.items()]
-    unused = [c for c in rates if c not in by_condition]
-    if unused:
-        lines.append(f"rate of change of {', '.join(unused)}: no component's expectation needs it (BIC)")
     return lines
 
 
