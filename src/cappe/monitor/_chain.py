@@ -181,7 +181,8 @@ class IngestResult:
         Why the measurement was recorded but not judged against the baseline (empty: it was judged, or no
         baseline exists yet).
     notes : tuple of str
-        What to know about its judgement (a condition slightly outside the learned range).
+        What to know about its judgement (a condition slightly outside the learned range, a rate of change not
+        known, a fit that did not succeed).
     """
 
     measurement_id: int
@@ -906,6 +907,11 @@ def ingest(
     meta: dict[str, Any] = {"notes": [*analysis.notes, *judge_notes], "fit": fit_meta}
     if rates:
         meta["rates"] = rates
+    # a fit that does not describe the measurement even after its restarts (a local minimum, a sensor mounted the
+    # other way round, a fault the model cannot describe): its factors, and a diagnosis from them, may be wrong
+    misfit = "" if analysis.estimate.success or baseline is None else (
+        f"the stiffness-factor fit did not succeed ({analysis.estimate.message}): its factors and any diagnosis "
+        "from them may be wrong")
     if not_judged:
         meta["not_judged"] = not_judged
     if len(finite) < len(given):
@@ -921,6 +927,8 @@ def ingest(
                          std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
         if baseline is not None and not not_judged:
             state, deviation, alarms = mon.step(state, analysis, {**given, **rates}, baseline)
+            if misfit:  # the alarm itself says it, where `monitor alarms` shows it later
+                alarms = [replace(a, message=f"{a.message}; {misfit}") for a in alarms]
             # the change from the healthy expectation at these conditions, for people and the dashboard
             tx.add_estimates(mid, path="deviation", values=dict(zip(names, np.expm1(deviation).tolist(), strict=True)),
                              std=dict(zip(names, baseline.scale.tolist(), strict=True)))
@@ -937,7 +945,7 @@ def ingest(
                              std=dict(zip(slow.names, slow.std.tolist(), strict=True)))
         analysis = replace(analysis, slow=slow)
     return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})),
-                        not_judged=tuple(not_judged), notes=tuple(judge_notes))
+                        not_judged=tuple(not_judged), notes=(*judge_notes, *([misfit] if misfit else [])))
 
 
 def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, Any]:
