@@ -169,3 +169,19 @@ def test_a_days_first_measurement_is_judged_and_marked(lagging, tmp_path: Path, 
     assert main(["monitor", "status", str(path)]) == 0
     out = capsys.readouterr().out
     assert "rate term in use: the expectation of front, rear follows the rate of change of temperature" in out
+
+
+def test_an_unknown_rate_widens_the_size_of_an_alarm_it_raises(lagging) -> None:
+    # a loss found at a day's first measurement: its size is read from a deviation that lacks the rate term, so its
+    # interval carries the term's scatter (without it, the interval would be that of a measurement with its rate)
+    monitor, floor, baseline, _ = lagging
+    before, m = floor.run(2, fault="front", loss=0.01, fault_at=1)
+    rate = condition_rates(m.conditions, m.timestamp, (before.timestamp, before.conditions))
+    analysis = monitor.analyse(m.frf, baseline=baseline, modal=False)
+    known = monitor.step(None, analysis, {**m.conditions, **rate}, baseline)[2][0].diagnosis
+    unknown = monitor.step(None, analysis, m.conditions, baseline)[2][0].diagnosis
+    assert known.hypothesis == unknown.hypothesis == "front"
+    extra = baseline.rate_std(m.conditions)[0] * (1 + unknown.change)  # ln units to a relative change
+    assert extra > 0.5 * known.change_std  # the term matters at this size
+    # in quadrature (tolerance 5 %: the size term follows the change, which differs by the rate term's part)
+    assert unknown.change_std == pytest.approx(np.hypot(known.change_std, extra), rel=0.05)

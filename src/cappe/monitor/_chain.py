@@ -758,7 +758,9 @@ class Monitor:
             # large: from this measurement's deviation along that fault (a drifting fault has grown since)
             chosen = diagnose(signal.change, baseline.size_covariance(signal.change, signal.change_weight),
                               list(hyps.values()))
-            now = diagnose(deviation, baseline.size_covariance(deviation), [hyps[chosen.hypothesis]])
+            # (a rate this measurement does not know adds the rate term's scatter to its deviation)
+            unknown = np.diag(baseline.rate_std(conditions) ** 2)
+            now = diagnose(deviation, baseline.size_covariance(deviation) + unknown, [hyps[chosen.hypothesis]])
             diagnosis = replace(chosen, change=now.change, change_std=now.change_std, severity=now.severity)
             held = best.get(diagnosis.hypothesis)
             if held is None or signal.statistic > held[0].statistic:
