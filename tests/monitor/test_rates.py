@@ -89,6 +89,33 @@ def test_the_rate_term_survives_measurements_without_a_rate_and_reads_the_lag() 
     assert Baseline.from_dict(b.to_dict()).rate_terms == b.rate_terms
 
 
+def test_a_store_baseline_takes_the_rates_across_the_nights(spindle: NumericModel, tmp_path: Path, capsys) -> None:
+    # the store path: rates from each record's predecessor, none after the night; the term survives the three
+    # mornings without a rate, and `monitor baseline` says it is in use
+    rng = np.random.default_rng(6)
+    times, sensor, true = _lagging_days(3, rng)
+    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
+                            band=(150.0, 1000.0))
+    names = Monitor(config, spindle).estimator.names
+    bearings = np.isin(names, ["front", "rear"])
+    logs = SENSITIVITY * (true[:, None] - 22.0) * bearings + 1e-4 * rng.standard_normal((true.size, len(names)))
+    path = tmp_path / "s.db"
+    with HistoryStore(path) as store:
+        store.add_machine("spindle-01", config.to_dict())
+        for when, reading, log_factor in zip(times, sensor, logs, strict=True):
+            with store.transaction("spindle-01") as tx:
+                mid = tx.add_measurement(timestamp=when, source=f"{when:%d%H%M}.csv", kind="frf",
+                                         conditions={"temperature": float(reading)})
+                tx.add_estimates(mid, path="fast", values=dict(zip(names, np.exp(log_factor).tolist(), strict=True)))
+    assert main(["monitor", "baseline", str(path)]) == 0
+    out = capsys.readouterr().out
+    assert "rate term in use: the expectation of front, rear follows the rate of change of temperature" in out
+    with HistoryStore(path) as store:
+        learned = Baseline.from_dict(store.baseline("spindle-01"))
+    assert learned.rate_terms == {"front": ("temperature",), "rear": ("temperature",)}
+    assert learned.n_measurements == len(times)  # the mornings without a rate are learned from, not left out
+
+
 def test_a_rate_term_that_does_not_fit_the_coefficients_is_malformed() -> None:
     rng = np.random.default_rng(1)
     times, sensor, true = _lagging_days(1, rng)
