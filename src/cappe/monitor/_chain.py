@@ -903,7 +903,9 @@ def ingest(
                 "iterations": analysis.estimate.iterations}
     given = {str(k): float(v) for k, v in (conditions or {}).items() if not str(k).startswith(RATE_PREFIX)}
     finite = {k: v for k, v in given.items() if np.isfinite(v)}
-    before = store.measurements(machine, until=timestamp - timedelta(microseconds=1), limit=1)
+    # (a timestamp that is not timezone-aware is refused by the record below, with its own message)
+    aware = isinstance(timestamp, datetime) and timestamp.utcoffset() is not None
+    before = store.measurements(machine, until=timestamp - timedelta(microseconds=1), limit=1) if aware else []
     rates = condition_rates(finite, timestamp, (before[0].timestamp, before[0].conditions) if before else None)
     not_judged, judge_notes = baseline.judge({**given, **rates}) if baseline is not None else ([], [])
     meta: dict[str, Any] = {"notes": [*analysis.notes, *judge_notes], "fit": fit_meta}
