@@ -186,10 +186,11 @@ def test_a_days_first_measurement_is_judged_and_marked(lagging, tmp_path: Path, 
         assert "rates" not in store.measurements("spindle-01")[-1].meta
         assert max(baseline.rate_std({"temperature": 22.0})) > 0 == max(
             baseline.rate_std({"temperature": 22.0, "rate:temperature": 0.05}))
-        # the next one, 15 minutes later, has its rate from the store, and no note
+        # the next one, 15 minutes later, has its rate from the store, and no note; a rate given is cappe's to take
         result = ingest(store, "spindle-01", second.frf, timestamp=second.timestamp, source="second.csv",
-                        conditions=second.conditions, monitor=monitor, keep_frf=False)
-        assert not any("rate of change" in n for n in result.notes), result.notes
+                        conditions={**second.conditions, "rate:temperature": 9.0}, monitor=monitor, keep_frf=False)
+        assert not any("rate of change of" in n for n in result.notes), result.notes
+        assert any("['rate:temperature'] are ignored" in n for n in result.notes), result.notes
         rate = store.measurements("spindle-01")[-1].meta["rates"]["rate:temperature"]
         assert rate == pytest.approx((second.conditions["temperature"] - first.conditions["temperature"]) / 15.0)
     # status says the rate term is in use, and for which components

@@ -908,6 +908,10 @@ def ingest(
     before = store.measurements(machine, until=timestamp - timedelta(microseconds=1), limit=1) if aware else []
     rates = condition_rates(finite, timestamp, (before[0].timestamp, before[0].conditions) if before else None)
     not_judged, judge_notes = baseline.judge({**given, **rates}) if baseline is not None else ([], [])
+    ignored = sorted(str(k) for k in (conditions or {}) if str(k).startswith(RATE_PREFIX))
+    if ignored:
+        judge_notes.append(f"the condition(s) {ignored} are ignored: '{RATE_PREFIX}' names are cappe's own rates of "
+                           "change, taken from the previous measurement")
     meta: dict[str, Any] = {"notes": [*analysis.notes, *judge_notes], "fit": fit_meta}
     if rates:
         meta["rates"] = rates
