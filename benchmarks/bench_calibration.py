@@ -43,8 +43,9 @@ BINS = (0.0, 0.05, 0.2, 0.4, 0.6, 0.8, 0.95, 1.0001)
 CASES = {"exact": {"mass_error": 0.0, "damping_factor": 1.0}, "mismatch": {"mass_error": 0.03, "damping_factor": 1.3}}
 
 
-def setup(case: str, seed: int = 1, sensor_lag: float = 0.5) -> tuple[Monitor, ShopFloor, Any]:
-    """The chain, the generator and a baseline learned from one healthy day of it."""
+def setup(case: str, seed: int = 1, sensor_lag: float = 0.5, rates: bool = False) -> tuple[Monitor, ShopFloor, Any]:
+    """The chain, the generator and a baseline learned from one healthy day of it (with ``rates``: the
+    conditions' rates of change from the measurements' times are candidate terms)."""
     model = NumericModel(load_model("builtin:spindle-bearing"))
     config = default_config(model, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
                             band=(150.0, 1000.0))
@@ -52,7 +53,8 @@ def setup(case: str, seed: int = 1, sensor_lag: float = 0.5) -> tuple[Monitor, S
     floor = ShopFloor(config, model, rng=np.random.default_rng(seed), sensor_lag=sensor_lag, **CASES[case])
     day = floor.run(96)
     baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in day],
-                                      conditions=[m.conditions for m in day], frfs=[m.frf for m in day])
+                                      conditions=[m.conditions for m in day], frfs=[m.frf for m in day],
+                                      timestamps=[m.timestamp for m in day] if rates else None)
     return monitor, floor, baseline
 
 

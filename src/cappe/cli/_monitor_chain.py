@@ -578,10 +578,27 @@ def baseline(args: argparse.Namespace) -> int:
         lines.append(f"  {name:10s} {doc['mean'][name]:8.4f} {100 * doc['std'][name] / doc['mean'][name]:8.4f}")
     lines.append(f"resolution {100 * result.resolution:.2g} % "
                  + ("(given)" if args.resolution is not None else "(derived from the healthy data's own scatter)"))
+    lines += _rate_lines(result.rate_terms)
     lines += [f"left out: {why}" for why in result.left_out]
     doc.pop("frf", None)  # the mean FRF is for the dashboard, not the terminal
     emit(args, doc, "\n".join(lines))
     return 0
+
+
+def _rate_lines(terms: dict[str, Any]) -> list[str]:
+    """What the baseline takes from the conditions' rates of change, for people."""
+    from cappe.monitor import RATE_GAP
+
+    by_condition: dict[str, list[str]] = {}
+    for name, conditions in terms.items():
+        for condition in conditions:
+            by_condition.setdefault(condition, []).append(name)
+    lines = [f"rate term in use: the expectation of {', '.join(names)} follows the rate of change of {condition} "
+             "(per minute, from the previous measurement: a condition sensor that lags); a measurement without a "
+             f"previous one within {RATE_GAP.total_seconds() / 60:g} min is judged at the learned mean rate, with "
+             "wider uncertainty"
+             for condition, names in by_condition.items()]
+    return lines
 
 
 def _status_of(store: Any, machine: str) -> dict[str, Any]:
@@ -665,6 +682,7 @@ def status(args: argparse.Namespace) -> int:
                              f"{100 * det['size_scale_std']:.2g} % of itself beyond the scatter (the healthy machine "
                              f"is {100 * det['model_offset']:.2g} % from its model, RMS over the components: its "
                              "sensitivities are about that far off)")
+            lines += [f"  {line}" for line in _rate_lines(det.get("rate_terms") or {})]
         lines += [f"  forecast {name}: {f['text']}" for name, f in d["forecasts"].items()]
         lines += [f"  note: {text}" for text in d["limitations"]]
         if d["latest"] and d["latest"].get("meta", {}).get("not_judged"):

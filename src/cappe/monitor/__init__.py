@@ -18,7 +18,7 @@ and dashboard, and the bearing-preload studies behind it.
   bearing stiffness test :func:`static_bearing_stiffness`.
 """
 
-from cappe.monitor._baseline import BASELINE_FORMAT, Baseline, learn_baseline
+from cappe.monitor._baseline import BASELINE_FORMAT, RATE_GAP, Baseline, condition_rates, learn_baseline, with_rates
 from cappe.monitor._chain import (
     OUTPUT_ONLY_LIMITATIONS,
     Alarm,
@@ -87,6 +87,7 @@ __all__ = [
     "CONFIG_FORMAT",
     "EXCITATIONS",
     "OUTPUT_ONLY_LIMITATIONS",
+    "RATE_GAP",
     "SCENARIOS",
     "SCENARIO_FORMAT",
     "SEVERITY_GRADES",
@@ -118,6 +119,7 @@ __all__ = [
     "SequentialDetector",
     "SeverityThresholds",
     "StaticBearingTest",
+    "condition_rates",
     "cusum_arl",
     "cusum_limit",
     "decode_frf",
@@ -148,6 +150,7 @@ __all__ = [
     "simulate_operation",
     "simulate_scenario",
     "static_bearing_stiffness",
+    "with_rates",
     "worst_severity",
     "write_scenario",
 ]

@@ -22,6 +22,18 @@ extrapolation), leaves the measurement recorded but not judged; one more than :d
 away is called implausible (a unit or sensor error). :meth:`Baseline.gradient` gives the change of the expected
 log-factors per unit of each condition: the signature of a condition sensor that reads off by a constant.
 
+A condition sensor that lags what it stands for (a housing sensor behind the bearing) reads low while the machine
+warms up and high while it cools: the error is the lag times the condition's rate of change. The baseline can
+therefore also depend on the *rate of change* of each condition, per minute, taken from the previous measurement
+of the same machine (:func:`condition_rates`; the derived condition ``rate:<name>``). :func:`learn_baseline`
+adds a linear term in a condition's rate to a component's expectation only where it lowers the Bayesian information
+criterion (BIC) of that component's fit (a lagging temperature sensor moves the bearings' expectation, not the
+screws'). The rate is unknown for a machine's first measurement, one after a gap longer than
+:data:`RATE_GAP` (the first one of a day, after the night) or one whose rate is implausible: such a measurement is
+still judged, at the learned mean rate, with the rate term's healthy scatter added to its own uncertainty
+(:meth:`Baseline.rate_std`), and :meth:`Baseline.judge` says so. Measurements without a rate do not drop the term
+while learning: it is fitted on those that have one.
+
 A change is read through the model's sensitivities, so a model that does not describe the machine reads it too large
 or too small by a fraction of itself that the healthy scatter cannot show. How large that fraction is depends on
 *what* is off and on the component, not on the size of the offset: on the spindle, masses 3 % off shift every
@@ -40,7 +52,7 @@ from __future__ import annotations
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
-from datetime import UTC, datetime
+from datetime import UTC, datetime, timedelta
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -52,8 +64,9 @@ from cappe.systems.frf import FRFData
 if TYPE_CHECKING:
     from cappe.monitor._estimation import FactorEstimator
 
-__all__ = ["BASELINE_FORMAT", "BLOCK", "IMPLAUSIBLE", "LEARNED_MARGIN", "SIZE_SCALE_FLOOR", "TWIN_LOSSES",
-           "Baseline", "derived_resolution", "learn_baseline", "twin_size_errors"]
+__all__ = ["BASELINE_FORMAT", "BLOCK", "IMPLAUSIBLE", "LEARNED_MARGIN", "RATE_GAP", "RATE_PREFIX", "SIZE_SCALE_FLOOR",
+           "TWIN_LOSSES", "Baseline", "condition_rates", "derived_resolution", "learn_baseline", "rate_name",
+           "twin_size_errors", "with_rates"]
 
 BASELINE_FORMAT = "cappe.monitor-baseline/1"
 
@@ -88,6 +101,127 @@ TWIN_FITS = 8
 #: Consecutive healthy measurements whose mean residual shows variation slower than one measurement.
 BLOCK = 8
 
+#: Name prefix of the derived rate-of-change conditions (``rate:temperature``, per minute): cappe's, not a sensor's.
+RATE_PREFIX = "rate:"
+
+#: Longest time from the previous measurement of the same machine over which a condition's rate of change is taken
+#: (a longer gap, such as the night before a day's first measurement, leaves the rate unknown): four times the
+#: usual 15-minute interval, so a missed measurement or two still give a rate.
+RATE_GAP = timedelta(minutes=60)
+
+
+def rate_name(condition: str) -> str:
+    """The name of a condition's rate of change (``rate:<condition>``, per minute).
+
+    Parameters
+    ----------
+    condition : str
+        The operating condition.
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> rate_name("temperature")
+    'rate:temperature'
+    """
+    return f"{RATE_PREFIX}{condition}"
+
+
+def condition_rates(
+    conditions: Mapping[str, float] | None,
+    timestamp: datetime,
+    previous: tuple[datetime, Mapping[str, float] | None] | None,
+    *,
+    gap: timedelta = RATE_GAP,
+) -> dict[str, float]:
+    """Rate of change per minute of each condition since the previous measurement of the same machine.
+
+    Parameters
+    ----------
+    conditions : mapping name -> float or None
+        This measurement's operating conditions.
+    timestamp : datetime
+        When it was taken.
+    previous : (datetime, mapping) or None
+        Time and conditions of the machine's previous measurement (None: it has none).
+    gap : timedelta
+        Longest time from the previous measurement over which a rate is taken (:data:`RATE_GAP`).
+
+    Returns
+    -------
+    dict
+        ``rate:<name>`` -> change per minute, for each finite condition (not itself a rate) that the previous
+        measurement also gives; empty when there is no previous measurement, it is not earlier, or it is more than
+        ``gap`` earlier (the rate is unknown).
+
+    Examples
+    --------
+    >>> t = datetime(2026, 3, 2, 6, 15, tzinfo=UTC)
+    >>> condition_rates({"temperature": 21.0}, t, (t - timedelta(minutes=15), {"temperature": 19.5}))
+    {'rate:temperature': 0.1}
+    >>> condition_rates({"temperature": 21.0}, t, (t - timedelta(hours=8), {"temperature": 18.0}))
+    {}
+    """
+    if previous is None or not conditions or not previous[1]:
+        return {}
+    minutes = (timestamp - previous[0]).total_seconds() / 60.0
+    if not 0.0 < minutes <= gap.total_seconds() / 60.0:
+        return {}
+    before = previous[1]
+    rates = {}
+    for name, value in conditions.items():
+        if name.startswith(RATE_PREFIX) or name not in before:
+            continue
+        rate = (float(value) - float(before[name])) / minutes
+        if np.isfinite(rate):
+            rates[rate_name(name)] = rate
+    return rates
+
+
+def with_rates(
+    conditions: Sequence[Mapping[str, float] | None],
+    timestamps: Sequence[datetime],
+    previous: tuple[datetime, Mapping[str, float] | None] | None = None,
+    *,
+    gap: timedelta = RATE_GAP,
+) -> list[dict[str, float]]:
+    """Measurements' conditions with their rates of change (:func:`condition_rates`) added.
+
+    Parameters
+    ----------
+    conditions : sequence of mapping
+        Each measurement's operating conditions.
+    timestamps : sequence of datetime
+        When each was taken (any order: each one's previous is the one before it in time).
+    previous : (datetime, mapping), optional
+        The measurement before the earliest of them.
+    gap : timedelta
+        See :func:`condition_rates`.
+
+    Returns
+    -------
+    list of dict
+        In the order given.
+
+    Raises
+    ------
+    DataError
+        ``conditions`` and ``timestamps`` differ in length.
+    """
+    if len(conditions) != len(timestamps):
+        msg = f"rates of change: {len(conditions)} condition records but {len(timestamps)} timestamps"
+        raise DataError(msg)
+    out: list[dict[str, float]] = [{} for _ in conditions]
+    before = previous
+    for k in sorted(range(len(timestamps)), key=lambda i: timestamps[i]):
+        given = {name: float(v) for name, v in (conditions[k] or {}).items() if not name.startswith(RATE_PREFIX)}
+        out[k] = {**given, **condition_rates(given, timestamps[k], before, gap=gap)}
+        before = (timestamps[k], given)
+    return out
+
 
 @dataclass(frozen=True)
 class Baseline:
@@ -102,8 +236,9 @@ class Baseline:
     center, spread : ndarray, shape (n_cond,)
         Centre and half-range of each condition over the healthy data (the polynomial's variable is
         ``(c - center) / spread``).
-    coefficients : ndarray, shape (1 + 2 n_cond, n)
-        Constant, linear and quadratic terms of each component's expected log-factor.
+    coefficients : ndarray, shape (1 + 2 n_cond + n_rate, n)
+        Constant, linear and quadratic terms of each component's expected log-factor, then its linear terms in the
+        rates of change (0 where a component has no such term).
     covariance : ndarray, shape (n, n)
         Covariance of the healthy deviations.
     resolution : float
@@ -129,6 +264,14 @@ class Baseline:
     size_error : ndarray, shape (n, n), optional
         Largest relative error of component ``i``'s read change, as a fraction of a loss of component ``j``
         (column), on the machine's twin (:func:`twin_size_errors`); None: not measured (no FRFs).
+    rates : tuple of str
+        Conditions whose rate of change (``rate:<name>``, per minute) the expectation may depend on (see the module
+        notes); which components use each is :attr:`rate_terms`.
+    rate_center, rate_spread : ndarray, shape (n_rate,)
+        Centre and half-range of each rate over the healthy data (the variable is ``(rate - center) / spread``).
+    rate_mean, rate_scatter : ndarray, shape (n_rate,)
+        Mean and standard deviation of each rate over the healthy data: where a measurement's rate is unknown it
+        is judged at the mean, with the term's scatter added to its uncertainty.
     """
 
     names: tuple[str, ...]
@@ -147,6 +290,11 @@ class Baseline:
     sigma: float | None = None
     left_out: tuple[str, ...] = ()
     size_error: Array | None = None
+    rates: tuple[str, ...] = ()
+    rate_center: Array = field(default_factory=lambda: np.zeros(0))
+    rate_spread: Array = field(default_factory=lambda: np.ones(0))
+    rate_mean: Array = field(default_factory=lambda: np.zeros(0))
+    rate_scatter: Array = field(default_factory=lambda: np.zeros(0))
 
     def _design(self, conditions: Mapping[str, float] | None) -> Array:
         values = []
@@ -157,7 +305,50 @@ class Baseline:
                 raise DataError(msg)
             values.append(float(conditions[name]))
         x = (np.asarray(values, dtype=float) - self.center) / self.spread
-        return np.concatenate([[1.0], x, x**2])
+        known = self._known_rates(conditions)
+        rate = np.array([known.get(name, self.rate_mean[k]) for k, name in enumerate(self.rates)], dtype=float)
+        return np.concatenate([[1.0], x, x**2, (rate - self.rate_center) / self.rate_spread])
+
+    def _known_rates(self, conditions: Mapping[str, float] | None) -> dict[str, float]:
+        """The rates of ``conditions`` this baseline can use: finite, and not beyond :data:`IMPLAUSIBLE`
+        half-ranges of the learned ones (a sensor's jump, not a warm-up)."""
+        known = {}
+        for k, name in enumerate(self.rates):
+            value = float((conditions or {}).get(rate_name(name), np.nan))
+            if np.isfinite(value) and abs(value - self.rate_center[k]) <= IMPLAUSIBLE * self.rate_spread[k]:
+                known[name] = value
+        return known
+
+    @property
+    def rate_terms(self) -> dict[str, tuple[str, ...]]:
+        """Component -> the conditions whose rate of change its expectation uses (components without one left out)."""
+        rows = self.coefficients[1 + 2 * len(self.conditions):]
+        return {n: tuple(c for c, row in zip(self.rates, rows, strict=True) if row[j] != 0.0)
+                for j, n in enumerate(self.names) if np.any(rows[:, j] != 0.0)}
+
+    def rate_std(self, conditions: Mapping[str, float] | None) -> Array:
+        """Standard uncertainty of each expectation from rates of change these conditions do not give.
+
+        A measurement whose rate is unknown (see the module notes) is judged at the learned mean rate; what the
+        rate term spreads over the healthy data is then part of its deviation's uncertainty.
+
+        Parameters
+        ----------
+        conditions : mapping name -> float or None
+            The measurement's conditions, rates (``rate:<name>``) included where known.
+
+        Returns
+        -------
+        ndarray, shape (n,)
+            0 for every component when every rate the baseline uses is known.
+        """
+        known = self._known_rates(conditions)
+        rows = self.coefficients[1 + 2 * len(self.conditions):]
+        variance = np.zeros(len(self.names))
+        for k, name in enumerate(self.rates):
+            if name not in known:
+                variance += (rows[k] / self.rate_spread[k] * self.rate_scatter[k]) ** 2
+        return np.sqrt(variance)
 
     def judge(self, conditions: Mapping[str, float] | None) -> tuple[list[str], list[str]]:
         """Whether a measurement at these conditions can be judged against this baseline.
@@ -215,6 +406,24 @@ class Baseline:
             elif x > 1 + 1e-12:  # the learned extremes themselves (rounding) are inside
                 notes.append(f"{name} {value:.{digits}g} is slightly outside {learned} (judged on the extrapolated "
                              f"expectation)")
+        known = self._known_rates(given)
+        for k, name in enumerate(self.rates):
+            users = [n for n, used in self.rate_terms.items() if name in used]
+            if not users:
+                continue
+            value = float(given.get(rate_name(name), np.nan))
+            if name not in known:
+                why = (f"{value:.3g} per minute is implausible (a sensor's jump?)" if np.isfinite(value) else
+                       f"unknown (no earlier measurement of this machine within {RATE_GAP.total_seconds() / 60:g} "
+                       "min)")
+                extra = float(np.max(self.rate_std(given)))
+                notes.append(f"the rate of change of {name} is {why}: judged at the learned mean rate "
+                             f"{self.rate_mean[k]:+.3g} per minute, the rate term of {', '.join(users)} adding "
+                             f"{100 * extra:.2g} % to its uncertainty")
+            elif abs(value - self.rate_center[k]) > (1 + LEARNED_MARGIN) * self.rate_spread[k]:
+                lo, hi = self.rate_center[k] - self.rate_spread[k], self.rate_center[k] + self.rate_spread[k]
+                notes.append(f"the rate of change of {name}, {value:+.3g} per minute, is outside the learned "
+                             f"{lo:+.3g} to {hi:+.3g} (judged on the extrapolated rate term)")
         return reasons, notes
 
     def gradient(self, conditions: Mapping[str, float] | None = None) -> Array:
@@ -237,7 +446,7 @@ class Baseline:
         """
         x = self._design(conditions)[1:1 + len(self.conditions)]
         m = len(self.conditions)
-        linear, quadratic = self.coefficients[1:1 + m], self.coefficients[1 + m:]
+        linear, quadratic = self.coefficients[1:1 + m], self.coefficients[1 + m:1 + 2 * m]
         return np.asarray((linear + 2 * x[:, None] * quadratic) / self.spread[:, None], dtype=float)
 
     def expected(self, conditions: Mapping[str, float] | None = None) -> Array:
@@ -385,6 +594,12 @@ class Baseline:
             "sigma": self.sigma,
             "left_out": list(self.left_out),
             "size_error": None if self.size_error is None else self.size_error.tolist(),
+            "rates": list(self.rates),
+            "rate_center": self.rate_center.tolist(),
+            "rate_spread": self.rate_spread.tolist(),
+            "rate_mean": self.rate_mean.tolist(),
+            "rate_scatter": self.rate_scatter.tolist(),
+            "rate_terms": {n: list(v) for n, v in self.rate_terms.items()},
             # the view for people and the dashboard: factors at the centre of the conditions
             "mean": {n: float(v) for n, v in zip(self.names, mean, strict=True)},
             "std": {n: float(m * s) for n, m, s in zip(self.names, mean, self.std, strict=True)},
@@ -417,7 +632,7 @@ class Baseline:
             msg = f"baseline format must be {BASELINE_FORMAT!r}; got {data.get('format')!r}"
             raise DataError(msg)
         try:
-            return cls(
+            baseline = cls(
                 names=tuple(data["names"]),
                 conditions=tuple(data["conditions"]),
                 center=np.asarray(data["center"], dtype=float),
@@ -435,10 +650,24 @@ class Baseline:
                 left_out=tuple(str(v) for v in data.get("left_out", [])),
                 size_error=None if data.get("size_error") is None
                 else np.asarray(data["size_error"], dtype=float).reshape(len(data["names"]), len(data["names"])),
+                rates=tuple(str(v) for v in data.get("rates", [])),
+                rate_center=np.asarray(data.get("rate_center", []), dtype=float),
+                rate_spread=np.asarray(data.get("rate_spread", []), dtype=float),
+                rate_mean=np.asarray(data.get("rate_mean", []), dtype=float),
+                rate_scatter=np.asarray(data.get("rate_scatter", []), dtype=float),
             )
         except (KeyError, TypeError, ValueError) as exc:
             msg = f"baseline is malformed: {type(exc).__name__} {exc}"
             raise DataError(msg) from exc
+        rows = 1 + 2 * len(baseline.conditions) + len(baseline.rates)
+        sizes = {a.size for a in (baseline.rate_center, baseline.rate_spread, baseline.rate_mean,
+                                  baseline.rate_scatter)}
+        if baseline.coefficients.shape[0] != rows or sizes != {len(baseline.rates)}:
+            msg = (f"baseline is malformed: {len(baseline.conditions)} condition(s) and the rates "
+                   f"{list(baseline.rates)} need {rows} coefficient rows and {len(baseline.rates)} rate centres, "
+                   f"spreads, means and scatters; got {baseline.coefficients.shape[0]} rows and sizes {sorted(sizes)}")
+            raise DataError(msg)
+        return baseline
 
     def frf_data(self) -> FRFData | None:
         """The mean healthy FRF."""
@@ -522,7 +751,9 @@ def learn_baseline(
         Component names (n).
     conditions : sequence of mapping, optional
         Operating conditions of each measurement; those every measurement gives, and that vary, become
-        regressors (a quadratic in each).
+        regressors (a quadratic in each). Their rates of change (``rate:<name>``, :func:`with_rates`) are
+        candidate linear terms, taken per component where they lower its BIC and fitted on the measurements that
+        give them (a measurement without one keeps the other terms; see the module notes).
     frfs : sequence of FRFData, optional
         The healthy FRFs (their mean is kept when they share their lines).
     features : sequence of mapping, optional
@@ -560,7 +791,9 @@ def learn_baseline(
     if len(conds) != n_meas:
         msg = f"baseline: {n_meas} measurements but {len(conds)} condition records"
         raise DataError(msg)
-    common = sorted(set.intersection(*(set(c) for c in conds))) if conds else []
+    # rates of change are learned apart: a measurement without one (a day's first) must not drop the term
+    common = sorted(set.intersection(*({k for k in c if not k.startswith(RATE_PREFIX)} for c in conds))) if conds \
+        else []
     values = np.array([[float(c[k]) for k in common] for c in conds], dtype=float).reshape(n_meas, len(common))
     bad = np.argwhere(~np.isfinite(values))
     if bad.size:
@@ -582,11 +815,27 @@ def learn_baseline(
     x = (values - center) / spread if names_c else values
     design = np.column_stack([np.ones(n_meas), x, x**2])
     coefficients, *_ = np.linalg.lstsq(design, s, rcond=None)
-    residual = s - design @ coefficients
-    dof = max(n_meas - design.shape[1], 1)
+    rates, rate_values, known = _rate_candidates(conds, names_c, needed)
+    rate_center = (rate_values.min(axis=0) + rate_values.max(axis=0)) / 2 if rates else np.zeros(0)
+    rate_spread = np.ptp(rate_values, axis=0) / 2 if rates else np.ones(0)
+    rate_x = (rate_values - rate_center) / rate_spread
+    chosen = _bic_rate_terms(s[known], design[known], rate_x)
+    rows = known if chosen.any() else np.ones(n_meas, dtype=bool)
+    full = np.column_stack([design, np.zeros((n_meas, len(rates)))])
+    full[known, design.shape[1]:] = rate_x
+    coefficients = np.vstack([coefficients, np.zeros((len(rates), len(names)))])
+    for j in np.flatnonzero(chosen.any(axis=0)):
+        columns = np.concatenate([np.arange(design.shape[1]), design.shape[1] + np.flatnonzero(chosen[:, j])])
+        fitted, *_ = np.linalg.lstsq(full[np.ix_(known, columns)], s[known, j], rcond=None)
+        coefficients[:, j] = 0.0
+        coefficients[columns, j] = fitted
+    # the scatter of the measurements the expectation is judged with (those with their rates where a term uses one)
+    used = np.concatenate([np.arange(design.shape[1]), design.shape[1] + np.flatnonzero(chosen.any(axis=1))])
+    residual = s[rows] - full[rows] @ coefficients
+    dof = max(int(rows.sum()) - design.shape[1] - int(chosen.sum(axis=0).max(initial=0)), 1)
     covariance = residual.T @ residual / dof
     if resolution is None:
-        resolution = derived_resolution(residual, design)
+        resolution = derived_resolution(residual, full[np.ix_(rows, used)])
     feature_stats: dict[str, tuple[float, float]] = {}
     if features:
         for key in sorted({k for f in features for k in f}):
@@ -610,7 +859,72 @@ def learn_baseline(
         created=datetime.now(UTC).isoformat(),
         sigma=sigma,
         size_error=None if size_error is None else np.asarray(size_error, dtype=float),
+        rates=rates,
+        rate_center=rate_center,
+        rate_spread=rate_spread,
+        rate_mean=rate_values.mean(axis=0) if rates else np.zeros(0),
+        rate_scatter=rate_values.std(axis=0, ddof=1) if rates else np.zeros(0),
     )
+
+
+def _rate_candidates(
+    conds: Sequence[Mapping[str, float]], names_c: tuple[str, ...], needed: int,
+) -> tuple[tuple[str, ...], Array, NDArray[np.bool_]]:
+    """The conditions whose rate of change may enter the baseline, their rates on the measurements that give every
+    one of them, and which measurements those are.
+
+    A condition's rate is a candidate when the condition is one of the regression's (``names_c``), at least
+    ``needed + 3`` measurements give it finite and it varies; the rates are taken on the measurements that give all
+    the candidates (the others keep the terms that do not need a rate)."""
+    rates = []
+    for name in names_c:
+        column = np.array([float(c.get(rate_name(name), np.nan)) for c in conds], dtype=float)
+        finite = column[np.isfinite(column)]
+        if finite.size >= needed + 3 and np.ptp(finite) > 0:
+            rates.append(name)
+    table = np.array([[float(c.get(rate_name(name), np.nan)) for name in rates] for c in conds],
+                     dtype=float).reshape(len(conds), len(rates))
+    known = np.all(np.isfinite(table), axis=1)
+    if rates and (known.sum() < needed + 3 or np.any(np.ptp(table[known], axis=0) == 0)):
+        return (), np.zeros((len(conds), 0)), np.ones(len(conds), dtype=bool)
+    return tuple(rates), table[known], known
+
+
+def _bic_rate_terms(s: Array, design: Array, rate_x: Array) -> NDArray[np.bool_]:
+    """Which rate terms each component's expectation takes: forward selection by the Bayesian information
+    criterion ``N ln(RSS / N) + p ln N`` over the rows that have their rates.
+
+    Parameters
+    ----------
+    s : ndarray, shape (N, n)
+        Log-factors.
+    design : ndarray, shape (N, p)
+        The terms every component has (constant, linear and quadratic in the conditions).
+    rate_x : ndarray, shape (N, n_rate)
+        The candidate rate terms.
+
+    Returns
+    -------
+    ndarray of bool, shape (n_rate, n)
+    """
+    n_rows, n_comp = s.shape
+    chosen = np.zeros((rate_x.shape[1], n_comp), dtype=bool)
+
+    def bic(j: int, extra: NDArray[np.bool_]) -> float:
+        x = np.column_stack([design, rate_x[:, extra]])
+        coefficients, _, rank, _ = np.linalg.lstsq(x, s[:, j], rcond=None)
+        rss = float(np.sum((s[:, j] - x @ coefficients) ** 2))
+        return float(n_rows * np.log(max(rss, 1e-300) / n_rows) + int(rank) * np.log(n_rows))
+
+    for j in range(n_comp):
+        current = bic(j, chosen[:, j])
+        while not chosen[:, j].all():
+            trials = {k: bic(j, chosen[:, j] | (np.arange(len(chosen)) == k)) for k in np.flatnonzero(~chosen[:, j])}
+            best = min(trials, key=lambda k: trials[k])
+            if trials[best] >= current:
+                break
+            chosen[best, j], current = True, trials[best]
+    return chosen
 
 
 def twin_size_errors(

@@ -34,7 +34,7 @@ import hashlib
 import warnings
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
-from datetime import datetime
+from datetime import datetime, timedelta
 from pathlib import Path
 from typing import Any
 
@@ -44,7 +44,16 @@ from scipy.optimize import linear_sum_assignment
 
 from cappe.exceptions import DataError
 from cappe.model import NumericModel, load_model
-from cappe.monitor._baseline import LEARNED_MARGIN, SIZE_SCALE_FLOOR, Baseline, learn_baseline, twin_size_errors
+from cappe.monitor._baseline import (
+    LEARNED_MARGIN,
+    RATE_PREFIX,
+    SIZE_SCALE_FLOOR,
+    Baseline,
+    condition_rates,
+    learn_baseline,
+    twin_size_errors,
+    with_rates,
+)
 from cappe.monitor._config import MonitorConfig, severity_rank, worst_severity
 from cappe.monitor._detection import ChartSignal, SequentialDetector
 from cappe.monitor._diagnosis import Diagnosis, FaultHypothesis, diagnose
@@ -172,7 +181,8 @@ class IngestResult:
         Why the measurement was recorded but not judged against the baseline (empty: it was judged, or no
         baseline exists yet).
     notes : tuple of str
-        What to know about its judgement (a condition slightly outside the learned range).
+        What to know about its judgement (a condition slightly outside the learned range, a rate of change not
+        known, a fit that did not succeed).
     """
 
     measurement_id: int
@@ -487,6 +497,7 @@ class Monitor:
         frfs: Sequence[FRFData] | None = None,
         resolution: float | None = None,
         measurement_ids: Sequence[int] = (),
+        timestamps: Sequence[datetime] | None = None,
     ) -> Baseline:
         """A :class:`Baseline` from healthy analyses, with the mean FRF and the preload map for the dashboard.
 
@@ -495,7 +506,8 @@ class Monitor:
         analyses : sequence of Analysis
             Analyses of healthy measurements.
         conditions : sequence of mapping, optional
-            Operating conditions of each measurement (the expectation is quadratic in them).
+            Operating conditions of each measurement (the expectation is quadratic in them, and may take a linear
+            term in their rates of change: see ``timestamps``).
         frfs : sequence of FRFData, optional
             The measurements' FRFs, for the mean healthy FRF.
         resolution : float, optional
@@ -503,6 +515,10 @@ class Monitor:
             :func:`~cappe.monitor._baseline.derived_resolution`).
         measurement_ids : sequence of int
             Their ids in a history store.
+        timestamps : sequence of datetime, optional
+            When each was taken: the rates of change of the conditions from one measurement to the next
+            (:func:`~cappe.monitor._baseline.with_rates`) become candidate terms of the expectation. Without them
+            conditions that already carry their rates (``rate:<name>``) are used as given.
 
         Returns
         -------
@@ -511,11 +527,17 @@ class Monitor:
         Raises
         ------
         DataError
-            ``analyses`` is empty.
+            ``analyses`` is empty, or ``timestamps`` is not one per analysis.
         """
         if not analyses:
             msg = f"machine '{self.config.machine}': a baseline needs healthy measurements; got none"
             raise DataError(msg)
+        if timestamps is not None:
+            if len(timestamps) != len(analyses):
+                msg = (f"machine '{self.config.machine}': {len(analyses)} analyses but {len(timestamps)} "
+                       "timestamps")
+                raise DataError(msg)
+            conditions = with_rates(conditions if conditions is not None else [{}] * len(analyses), timestamps)
         return self._learn(np.array([a.estimate.log_factor for a in analyses]),
                            features=[a.feature_values() for a in analyses], conditions=conditions, frfs=frfs,
                            resolution=resolution, measurement_ids=measurement_ids,
@@ -675,10 +697,17 @@ class Monitor:
         analysis: Analysis,
         conditions: Mapping[str, float] | None,
         baseline: Baseline,
+        *,
+        timestamp: datetime | None = None,
     ) -> tuple[dict[str, Any], Array, list[Alarm]]:
         """Steps 4-6: update the charts, diagnose and grade what they signal, apply the alarm policy.
 
         Returns the new state (JSON-ready), the deviation of the log-factors and the alarms to raise.
+
+        The rates of change of the conditions (for a baseline that uses them) are taken as ``conditions`` give them
+        (``rate:<name>``, as :func:`ingest` adds them from the history store) or, with ``timestamp``, from the
+        previous measurement the state remembers (:func:`~cappe.monitor._baseline.condition_rates`). A rate that
+        is unknown widens the measurement's uncertainty by the rate term's scatter (:meth:`Baseline.rate_std`).
 
         Parameters
         ----------
@@ -690,6 +719,8 @@ class Monitor:
             Its operating conditions.
         baseline : Baseline
             The healthy baseline.
+        timestamp : datetime, optional
+            When the measurement was taken (keeps it in the state for the next one's rates).
 
         Returns
         -------
@@ -700,10 +731,20 @@ class Monitor:
         alarms : list of Alarm
         """
         detector = self.detector(baseline)
+        previous = None if state is None else state.get("previous")
         if state is None or state.get("baseline") != baseline.created:
             state = {"baseline": baseline.created, "detector": None, "active": {}, "count": 0}
+        given = {k: float(v) for k, v in (conditions or {}).items()}
+        if timestamp is not None:
+            if previous is not None and not any(k.startswith(RATE_PREFIX) for k in given):
+                given.update(condition_rates(given, timestamp, (datetime.fromisoformat(previous["timestamp"]),
+                                                                previous["conditions"])))
+            previous = {"timestamp": timestamp.isoformat(),
+                        "conditions": {k: v for k, v in given.items() if not k.startswith(RATE_PREFIX)}}
+        conditions = given
         deviation = baseline.deviation(analysis.estimate.log_factor, conditions)
-        log_std = np.sqrt(np.clip(np.diag(analysis.estimate.covariance), 0.0, None))
+        log_std = np.hypot(np.sqrt(np.clip(np.diag(analysis.estimate.covariance), 0.0, None)),
+                           baseline.rate_std(conditions))
         chart_state, signals = detector.update(state["detector"], deviation, log_std)
         active: dict[str, str] = dict(state["active"])
         hyps = {h.name: h for h in [*self.hypotheses(), *self.sensor_hypotheses(baseline, conditions)]}
@@ -717,7 +758,9 @@ class Monitor:
             # large: from this measurement's deviation along that fault (a drifting fault has grown since)
             chosen = diagnose(signal.change, baseline.size_covariance(signal.change, signal.change_weight),
                               list(hyps.values()))
-            now = diagnose(deviation, baseline.size_covariance(deviation), [hyps[chosen.hypothesis]])
+            # (a rate this measurement does not know adds the rate term's scatter to its deviation)
+            unknown = np.diag(baseline.rate_std(conditions) ** 2)
+            now = diagnose(deviation, baseline.size_covariance(deviation) + unknown, [hyps[chosen.hypothesis]])
             diagnosis = replace(chosen, change=now.change, change_std=now.change_std, severity=now.severity)
             held = best.get(diagnosis.hypothesis)
             if held is None or signal.statistic > held[0].statistic:
@@ -743,6 +786,8 @@ class Monitor:
             alarms.append(Alarm(name, statistic, signal.statistic, grade, diagnosis, message))
         new_state = {"baseline": baseline.created, "detector": chart_state, "active": active,
                      "count": int(state["count"]) + 1}
+        if previous is not None:
+            new_state["previous"] = previous
         return new_state, deviation, alarms
 
 
@@ -802,6 +847,11 @@ def ingest(
     ``IngestResult.not_judged`` and the record's meta say why. Conditions that are not finite numbers are kept
     in the meta, not with the conditions.
 
+    The rates of change of the conditions are taken from the machine's previous recorded measurement (the latest
+    one before ``timestamp``; :func:`~cappe.monitor._baseline.condition_rates`) and kept in the meta as
+    ``rates``; where there is none within :data:`~cappe.monitor._baseline.RATE_GAP` the measurement is judged
+    without them and a note says so (:meth:`Baseline.judge`).
+
     The heavy steps (features, estimation) run before the transaction; detection, diagnosis and the record run
     inside it, under the store's per-machine lock, so concurrent ingests continue each other's charts. When
     an alarm is raised, or every ``slow_every`` measurements, the slow path runs afterwards and adds its
@@ -851,10 +901,25 @@ def ingest(
     alarms: list[Alarm] = []
     fit_meta = {"success": analysis.estimate.success, "sigma": analysis.estimate.sigma,
                 "iterations": analysis.estimate.iterations}
-    given = {str(k): float(v) for k, v in (conditions or {}).items()}
+    given = {str(k): float(v) for k, v in (conditions or {}).items() if not str(k).startswith(RATE_PREFIX)}
     finite = {k: v for k, v in given.items() if np.isfinite(v)}
-    not_judged, judge_notes = baseline.judge(given) if baseline is not None else ([], [])
+    # (a timestamp that is not timezone-aware is refused by the record below, with its own message)
+    aware = isinstance(timestamp, datetime) and timestamp.utcoffset() is not None
+    before = store.measurements(machine, until=timestamp - timedelta(microseconds=1), limit=1) if aware else []
+    rates = condition_rates(finite, timestamp, (before[0].timestamp, before[0].conditions) if before else None)
+    not_judged, judge_notes = baseline.judge({**given, **rates}) if baseline is not None else ([], [])
+    ignored = sorted(str(k) for k in (conditions or {}) if str(k).startswith(RATE_PREFIX))
+    if ignored:
+        judge_notes.append(f"the condition(s) {ignored} are ignored: '{RATE_PREFIX}' names are cappe's own rates of "
+                           "change, taken from the previous measurement")
     meta: dict[str, Any] = {"notes": [*analysis.notes, *judge_notes], "fit": fit_meta}
+    if rates:
+        meta["rates"] = rates
+    # a fit that does not describe the measurement even after its restarts (a local minimum, a sensor mounted the
+    # other way round, a fault the model cannot describe): its factors, and a diagnosis from them, may be wrong
+    misfit = "" if analysis.estimate.success or baseline is None else (
+        f"the stiffness-factor fit did not succeed ({analysis.estimate.message}): its factors and any diagnosis "
+        "from them may be wrong")
     if not_judged:
         meta["not_judged"] = not_judged
     if len(finite) < len(given):
@@ -869,7 +934,9 @@ def ingest(
         tx.add_estimates(mid, path="fast", values=dict(zip(names, analysis.estimate.factor.tolist(), strict=True)),
                          std=dict(zip(names, analysis.estimate.std.tolist(), strict=True)))
         if baseline is not None and not not_judged:
-            state, deviation, alarms = mon.step(state, analysis, conditions, baseline)
+            state, deviation, alarms = mon.step(state, analysis, {**given, **rates}, baseline)
+            if misfit:  # the alarm itself says it, where `monitor alarms` shows it later
+                alarms = [replace(a, message=f"{a.message}; {misfit}") for a in alarms]
             # the change from the healthy expectation at these conditions, for people and the dashboard
             tx.add_estimates(mid, path="deviation", values=dict(zip(names, np.expm1(deviation).tolist(), strict=True)),
                              std=dict(zip(names, baseline.scale.tolist(), strict=True)))
@@ -886,7 +953,7 @@ def ingest(
                              std=dict(zip(slow.names, slow.std.tolist(), strict=True)))
         analysis = replace(analysis, slow=slow)
     return IngestResult(mid, analysis, deviation, tuple(alarms), dict((state or {}).get("active", {})),
-                        not_judged=tuple(not_judged), notes=tuple(judge_notes))
+                        not_judged=tuple(not_judged), notes=(*judge_notes, *([misfit] if misfit else [])))
 
 
 def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, Any]:
@@ -907,7 +974,8 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
         ``size_scale_std``: the relative standard uncertainty of a diagnosed change's size beyond the scatter
         (:attr:`Baseline.size_scale_std`, the largest over the components); ``model_offset``: how far the healthy
         machine is from its model; ``size_scale``: component -> its own size uncertainty measured on the machine's
-        twin (:meth:`Baseline.component_scale_std`; None without the twin).
+        twin (:meth:`Baseline.component_scale_std`; None without the twin); ``rate_terms``: component -> the
+        conditions whose rate of change its expectation uses (:attr:`Baseline.rate_terms`).
     """
     detector = SequentialDetector(baseline.names, baseline.scale, method=config.detection,
                                   false_alarm_rate=config.false_alarm_rate, shift=config.shift,
@@ -918,7 +986,8 @@ def detectable_change(config: MonitorConfig, baseline: Baseline) -> dict[str, An
             "measurements": float(design["arl_at_shift"]), "resolution": baseline.resolution,
             "shift": config.shift, "size_scale_std": baseline.size_scale_std, "model_offset": baseline.model_offset,
             "size_scale": None if baseline.size_error is None else
-            {n: float(v) for n, v in zip(baseline.names, baseline.component_scale_std(), strict=True)}}
+            {n: float(v) for n, v in zip(baseline.names, baseline.component_scale_std(), strict=True)},
+            "rate_terms": {n: list(v) for n, v in baseline.rate_terms.items()}}
 
 
 def file_digest(path: str | Path) -> str:
@@ -1025,6 +1094,9 @@ def learn_store_baseline(
     """Learn the healthy baseline from recorded measurements (the first ``first``, or those in a time range),
     store it, and restart the detector state.
 
+    The rates of change of the conditions are taken from each measurement's predecessor in the store
+    (:func:`~cappe.monitor._baseline.with_rates`) and offered to the baseline as terms.
+
     Parameters
     ----------
     store : HistoryStore
@@ -1078,7 +1150,10 @@ def learn_store_baseline(
     feats = feats[feats["measurement_id"].isin(ids)]
     per_measurement = [dict(zip(g["name"], g["value"], strict=True)) for _, g in feats.groupby("measurement_id")]
     frfs = [f for f in (store.frf(i) for i in ids) if f is not None]
-    baseline = mon._learn(log_factors, features=per_measurement, conditions=[r.conditions for r in records],
+    before = store.measurements(machine, until=records[0].timestamp - timedelta(microseconds=1), limit=1)
+    conditions = with_rates([r.conditions for r in records], [r.timestamp for r in records],
+                            (before[0].timestamp, before[0].conditions) if before else None)
+    baseline = mon._learn(log_factors, features=per_measurement, conditions=conditions,
                           frfs=frfs if len(frfs) == len(ids) else None, resolution=resolution,
                           measurement_ids=ids, sigma=_median_fit_sigma(records))
     baseline = replace(baseline, left_out=tuple(left_out))
