@@ -225,7 +225,9 @@ def dask(argv: list[str]) -> None:
         print(f"serial: {serial['wall_s']:.1f} s wall, {serial['cpu_s']:.1f} s CPU, load {serial['load']:.1f}; "
               f"stages (wall s): {', '.join(f'{k} {v:.1f}' for k, v in diag['timings'].items())}", flush=True)
         for n in workers:
-            with (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None) as cluster,
+            # the scheduler's HTTP server on a free port (its default 8787 may be taken by another cluster)
+            with (LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               scheduler_kwargs={"dashboard_address": ":0"}) as cluster,
                   Client(cluster) as client):
                 address = cluster.scheduler_address
                 overhead = _task_overhead(address, ModalEngine(machine, sensors=None), 200) if n == workers[0] else None

@@ -295,7 +295,10 @@ def test_three_axis_identification_on_a_local_cluster_equals_serial():
                                        exact=False, executor=executor).fit(reference)
 
     serial = identify("serial")
-    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cluster:
+    # no dashboard, and the scheduler's HTTP server on a free port: its default, 8787, may be taken by another
+    # cluster on the machine, and distributed's warning about it fails the test (filterwarnings = error)
+    with LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None,
+                      scheduler_kwargs={"dashboard_address": ":0"}) as cluster:
         with Executor(cluster.scheduler_address) as ex:
             remote = identify(ex)
             loads = ex.client.run(shared_loads)
