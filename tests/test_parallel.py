@@ -254,6 +254,32 @@ def test_dask_ships_the_model_once_per_worker_not_per_task(bench, dask_cluster):
         assert not any(ex.client.run(shared_loads).values())
 
 
+def _page_faults_per_array(mib: int):
+    # a closure, shipped by value: the page faults of allocating, filling and freeing an array of `mib` MiB
+    def work(s: slice) -> float:
+        import resource
+
+        for _ in range(5):  # the first arrays may fault the heap in
+            np.ones(mib << 17).sum()
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        for _ in range(40):
+            np.ones(mib << 17).sum()
+        return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 40
+
+    return work
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
+def test_dask_workers_keep_freed_memory_despite_the_nanny_trim_threshold(dask_cluster):
+    # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's mmap threshold
+    # at 128 KiB: every 1 MiB array was 256 fresh pages (and the worker spent ~2x a plain process's CPU)
+    with Executor(dask_cluster) as ex:
+        assert set(ex.client.run(os.getenv, "MALLOC_TRIM_THRESHOLD_").values()) == {"65536"}
+        faults = ex.map(_page_faults_per_array(1), [slice(0, 1), slice(1, 2)])
+    assert max(faults) < 16, faults  # 256 per array before
+
+
 @pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
 def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
     code = "from cappe.parallel import retain_freed_memory as r; print(r(), r())"
