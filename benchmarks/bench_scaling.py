@@ -16,7 +16,8 @@ to ``benchmarks/results/scaling.json`` with a plot ``scaling.png``.
 generator of :mod:`benchmarks.bench_three_axis` at a random truth), run as a command in a child process: serially
 (``--executor serial``), then with ``--scheduler`` on a real local Dask cluster started here
 (``distributed.LocalCluster``: a scheduler and 1, 2, ... worker processes of one thread each, every process on one
-BLAS thread). The result files must be identical except their timings, and so must the printed text and warnings.
+BLAS thread, the workers with one malloc arena: ``MALLOC_ARENA_MAX=1``). The result files must be identical except
+their timings, and so must the printed text and warnings.
 The GSA, the subproblems, the stiffness refinement's starts and the validations run on the cluster, the other steps
 in the command's process. Default settings keep one run to minutes on a shared 2-core host: 2 identification
 positions, ``--n-gsa 16 --n-opt 4 --permutations 2 --first-order``; ``--full`` takes bench_three_axis's (4
@@ -204,6 +205,12 @@ def dask(argv: list[str]) -> None:
         "--n-gsa", "16", "--n-opt", "4", "--permutations", "2", "--first-order"]
     # one BLAS thread in every process: the client, the CLI and the workers (they inherit it)
     os.environ.update({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1"})
+    # one malloc arena in each (single-threaded) worker, set before it starts: a task runs on the worker's executor
+    # thread, whose own arena unmaps its heaps as they empty (see cappe.parallel: 1.3x the CPU of the same work in
+    # a plain process without it)
+    import dask
+
+    dask.config.set({"distributed.nanny.pre-spawn-environ.MALLOC_ARENA_MAX": 1})
     machine = NumericModel(load_model("builtin:three-axis-machine-tool"))
     space = ParameterSpace.from_model(machine)
     rng = np.random.default_rng(opts.seed)

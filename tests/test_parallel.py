@@ -254,6 +254,75 @@ def test_dask_ships_the_model_once_per_worker_not_per_task(bench, dask_cluster):
         assert not any(ex.client.run(shared_loads).values())
 
 
+def _validate_against_truth(model: NumericModel, reference, truth: dict[str, float]):
+    # a closure, shipped by value (its model once per executor): the validation of the truth at one position
+    def work(k: int) -> float:
+        from cappe.estimate._validation import validate_identification
+
+        result = validate_identification(model=model, params=model.nominal, reference=reference,
+                                         position=POSITIONS[k], truth=truth, n_freq=50)
+        return float(np.nanmean(result.frac))
+
+    return work
+
+
+def _models_alive():
+    # a closure, shipped by value: (NumericModels alive, truth FRFs kept) in the process, after a collection
+    def probe() -> tuple[int, int]:
+        import gc
+
+        from cappe.estimate._validation import _truth_receptance
+        from cappe.model import NumericModel
+
+        gc.collect()
+        cache = _truth_receptance
+        kept = len(cache) if hasattr(cache, "__len__") else cache.cache_info().currsize  # the lru_cache before
+        return sum(isinstance(o, NumericModel) for o in gc.get_objects()), kept
+
+    return probe
+
+
+@pytest.mark.slow
+def test_closing_a_dask_executor_releases_the_workers_truth_frfs(bench, reference, dask_cluster):
+    truth = {"me_kx": 7.1e7, "lgs_ky": 3.4e8, "me_by": 1.1e4}
+    with Executor(dask_cluster) as ex:
+        assert all(n == 0 for n, _ in ex.client.run(_models_alive()).values())
+        fracs = ex.map(_validate_against_truth(bench, reference, truth), [0, 1, 2, 0])
+        during = ex.client.run(_models_alive())
+    assert np.all(np.isfinite(fracs))
+    assert any(n > 0 and kept > 0 for n, kept in during.values())  # the workers held the model and its FRFs
+    with Executor(dask_cluster) as ex:
+        after = ex.client.run(_models_alive())
+    # before: the validation's FRF cache kept each worker's model copy (and its FRFs) after the executor closed
+    assert all(n == 0 and kept == 0 for n, kept in after.values()), after
+
+
+def _page_faults_per_array(mib: int):
+    # a closure, shipped by value: the page faults of allocating, filling and freeing an array of `mib` MiB
+    def work(s: slice) -> float:
+        import resource
+
+        for _ in range(5):  # the first arrays may fault the heap in
+            np.ones(mib << 17).sum()
+        before = resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+        for _ in range(40):
+            np.ones(mib << 17).sum()
+        return (resource.getrusage(resource.RUSAGE_SELF).ru_minflt - before) / 40
+
+    return work
+
+
+@pytest.mark.slow
+@pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
+def test_dask_workers_keep_freed_memory_despite_the_nanny_trim_threshold(dask_cluster):
+    # Dask's nanny starts each worker with MALLOC_TRIM_THRESHOLD_=65536, which also freezes glibc's mmap threshold
+    # at 128 KiB: every 1 MiB array was 256 fresh pages (and the worker spent ~2x a plain process's CPU)
+    with Executor(dask_cluster) as ex:
+        assert set(ex.client.run(os.getenv, "MALLOC_TRIM_THRESHOLD_").values()) == {"65536"}
+        faults = ex.map(_page_faults_per_array(1), [slice(0, 1), slice(1, 2)])
+    assert max(faults) < 16, faults  # 256 per array before
+
+
 @pytest.mark.skipif(sys.platform != "linux" or platform.libc_ver()[0] != "glibc", reason="glibc only")
 def test_allocator_is_tuned_once_unless_the_user_set_glibc_variables():
     code = "from cappe.parallel import retain_freed_memory as r; print(r(), r())"

@@ -39,7 +39,9 @@ FRFs (FRAC, CSF).
 
 from __future__ import annotations
 
-import functools
+import threading
+import weakref
+from collections import OrderedDict
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -309,15 +311,52 @@ def _receptance_lines(model: NumericModel, params: Array, position: Mapping[str,
     return out
 
 
-@functools.lru_cache(maxsize=4)
-def _truth_receptance(model: NumericModel, truth: bytes, position: tuple[tuple[str, float], ...], grid: bytes,
-                      outputs: tuple[str, ...], inputs: tuple[str, ...]) -> CArray:
+class _TruthReceptances:
     """The reference FRFs of a simulated reference (line-major), computed once for the validations that share
-    them (the held-out position and every permuted-damping model compare against the same truth); the
-    automated identification clears this cache when its validations are done."""
-    out = _receptance_lines(model, np.frombuffer(truth), dict(position), np.frombuffer(grid), outputs, inputs)
-    out.setflags(write=False)
-    return out
+    them (the held-out position and every permuted-damping model compare against the same truth): the 4 most
+    recent per model. The automated identification clears it (:meth:`cache_clear`) when its validations are done.
+
+    The models are held weakly: on a Dask worker the model is the executor's copy (shipped once), which the worker
+    drops when the executor closes; a cache that held it (an ``lru_cache`` keyed by the model did) kept the copy
+    and its tens of MB of FRFs in the worker for as long as the worker lived.
+    """
+
+    KEPT = 4
+
+    def __init__(self) -> None:
+        self._lock = threading.Lock()
+        self._frfs: weakref.WeakKeyDictionary[NumericModel, OrderedDict[tuple[Any, ...], CArray]] = (
+            weakref.WeakKeyDictionary())
+
+    def __call__(self, model: NumericModel, truth: bytes, position: tuple[tuple[str, float], ...], grid: bytes,
+                 outputs: tuple[str, ...], inputs: tuple[str, ...]) -> CArray:
+        key = (truth, position, grid, outputs, inputs)
+        with self._lock:
+            kept = self._frfs.setdefault(model, OrderedDict())
+            out = kept.get(key)
+            if out is not None:
+                kept.move_to_end(key)
+                return out
+        out = _receptance_lines(model, np.frombuffer(truth), dict(position), np.frombuffer(grid), outputs, inputs)
+        out.setflags(write=False)
+        with self._lock:
+            kept[key] = out
+            while len(kept) > self.KEPT:
+                kept.popitem(last=False)
+        return out
+
+    def __len__(self) -> int:
+        """The FRFs kept, over all models."""
+        with self._lock:
+            return sum(len(kept) for kept in self._frfs.values())
+
+    def cache_clear(self) -> None:
+        """Forget every FRF kept."""
+        with self._lock:
+            self._frfs.clear()
+
+
+_truth_receptance = _TruthReceptances()
 
 
 def _line_criteria(h_mod: CArray, h_ref: CArray) -> tuple[Array, Array]:
