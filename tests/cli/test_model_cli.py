@@ -254,6 +254,55 @@ def test_demo_prints_modes_and_tfs(capsys):
     assert "spindle monitoring" not in out
 
 
+class _StopDemo(Exception):
+    """Raised by the stand-ins below once the demo's identification stage has shown what it was given."""
+
+
+def test_demo_identification_options_reach_the_identification(monkeypatch, tmp_path, capsys):
+    # --n-gsa, --n-opt, --seed and --report go to the identification stage; what each does there is the identify
+    # command's (the option audit's identify cases drive them on the small slide). Here: that the demo hands them
+    # on, without running the stage (a minute per run), and that --no-identify skips it.
+    import cappe.estimate
+    import cappe.report
+
+    seen: list[dict[str, object]] = []
+
+    class Recording:
+        def __init__(self, machine, **settings):
+            seen.append(dict(settings))
+
+        def fit(self, reference, *, truth=None):
+            seen[-1]["truth"] = truth
+            seen[-1]["reference"] = reference
+            self.result_ = None
+            return self
+
+    def report(path, **_):
+        seen[-1]["report"] = path
+        raise _StopDemo
+
+    monkeypatch.setattr(cappe.estimate, "AutomatedIdentification", Recording)
+    monkeypatch.setattr(cappe.report, "write_html_report", report)
+    monkeypatch.chdir(tmp_path)
+    for argv in (["--n-gsa", "32", "--n-opt", "2", "--seed", "1", "--report", "a.html"],
+                 ["--n-gsa", "16", "--n-opt", "1", "--seed", "2", "--report", "b.html"], []):
+        with pytest.raises(_StopDemo):
+            main(["demo", "--no-monitor", *argv])
+    capsys.readouterr()
+    first, second, default = seen
+    assert (first["n_gsa"], first["n_opt"], first["rng"], first["report"]) == (32, 2, 1, "a.html")
+    assert (second["n_gsa"], second["n_opt"], second["rng"], second["report"]) == (16, 1, 2, "b.html")
+    assert (default["n_gsa"], default["n_opt"], default["rng"], default["report"]) == (
+        256, 20, 1, "cappe-demo-report.html")
+    # the seed draws the truth: another seed, another truth, and the reference modes simulated at it
+    assert first["truth"] != second["truth"]
+    assert first["truth"] == default["truth"]
+    assert not np.allclose(first["reference"].sets[0].frequency, second["reference"].sets[0].frequency)
+    seen.clear()
+    assert main(["demo", "--no-monitor", "--no-identify"]) == 0
+    assert seen == []  # --no-identify: the stage is not entered
+
+
 @pytest.mark.slow
 @pytest.mark.extended(reason="each fault of the demo is detected and diagnosed by the chain's own tests: "
                              "tests/monitor/test_chain.py (preload loss, loosening screw) and "

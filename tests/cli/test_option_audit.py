@@ -9,7 +9,8 @@ The data files are made once per module: the README's sled, a carriage of our ow
 position (the sled's do not: its table and shoe move together), the two-mass rig's modes, time records, FRFs, a
 monitoring store, and a static bearing test written from the rigid-shaft lever rule with numpy. A command line
 that several cases share (a base) runs once per module. The demo's identification and monitoring stages take
-minutes: those cases are ``extended``, each naming the faster test of the same contract.
+minutes: their options are in ``EXEMPT``, each naming the faster test of the same contract; a case that must run such
+a stage is ``extended``.
 """
 
 from __future__ import annotations
@@ -687,15 +688,6 @@ CASES = [
     # -- demo (the identification and monitoring stages take tens of seconds) --------------------------------------
     _case("demo", "--json", ["demo", "--no-identify", "--no-monitor"], ["--json"]),
     _case("demo", "--out", ["demo", "--no-identify", "--no-monitor"], ["-o", "{w}/demo.json"]),
-    _case("demo", "--no-identify", ["demo", "--no-monitor", "--n-gsa", "32", "--n-opt", "2", "--json"],
-          ["--no-identify"], extended="the identification stage takes a minute; test_demo_prints_modes_and_tfs "
-                                      "runs the demo with --no-identify"),
-    *[_case("demo", option, ["demo", "--no-monitor", "--n-gsa", "32", "--n-opt", "2", "--report", "{w}/d.html",
-                             "--json"], extra,
-            extended=f"the demo's identification stage takes a minute; the identify {option} case of this audit "
-                     "drives the same option of the same stage on the small slide in seconds")
-      for option, extra in (("--report", ["--report", "{w}/d2.html"]), ("--n-gsa", ["--n-gsa", "16"]),
-                            ("--n-opt", ["--n-opt", "1"]), ("--seed", ["--seed", "2"]))],
 ]
 
 #: Options the difference test does not drive, each with the reason and where its effect is tested.
@@ -704,6 +696,11 @@ EXEMPT = {
     # runs exist already, with and without it
     ("demo", "--no-monitor"): "tests/cli/test_model_cli.py: test_demo_monitoring_finds_each_fault (without it: the "
                               "alarms of every scenario) and test_demo_prints_modes_and_tfs (with it: no monitoring)",
+    # each would run the demo's identification stage (about a minute) twice; what the options do there is the
+    # identify command's (the identify cases of this audit drive them on the small slide in seconds)
+    **{("demo", option): "tests/cli/test_model_cli.py::test_demo_identification_options_reach_the_identification "
+                         "(the demo hands the option to the identification stage; --no-identify skips it)"
+       for option in ("--no-identify", "--n-gsa", "--n-opt", "--seed", "--report")},
     ("model show", "--position"): "refused: show describes every position (test_cli_conventions)",
     ("model zpk", "--symbolic"): "refused: zpk needs numbers (a usage error with the way out, --exact)",
     ("estimate", "--position"): "tests/cli/test_estimate_cli.py::test_position_reaches_the_estimator (c792c4b)",
