@@ -41,7 +41,7 @@ def pytest_configure(config: pytest.Config) -> None:
 SPREAD: dict[str, tuple[str, ...]] = {
     "tests/cli/test_option_audit.py": (),  # 350 command-line cases; its data folder (~15 s) is built once per run
     # the README's commands read each other's files: one unit, in order
-    "tests/cli/test_model_cli.py": ("test_readme_command_runs_as_subprocess",),
+    "tests/cli/test_model_cli.py": ("test_readme_command_runs",),
 }
 
 
@@ -51,7 +51,7 @@ SPREAD: dict[str, tuple[str, ...]] = {
 #: (``make test-slow``: the flexible bed's 57 s identification started at 120 s of 200). A unit not in the run
 #: being scheduled is passed over.
 FIRST: tuple[str, ...] = (
-    "tests/cli/test_model_cli.py::test_readme_command_runs_as_subprocess",  # 180 s, in order
+    "tests/cli/test_model_cli.py::test_readme_command_runs",  # 180 s, in order
     "tests/monitor/test_calibration.py",  # extended: 84 s (1000 healthy measurements of the independent generator)
     "tests/monitor/test_chain.py",  # 65 s (extended: 25 s)
     "tests/library/test_uniaxial_machine_tool_flexible_bed.py",  # extended: 57 s

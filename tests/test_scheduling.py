@@ -56,7 +56,7 @@ def test_work_units():
     assert work_unit("src/cappe/io/uff.py::cappe.io.uff.write_uff_frf") == "src/cappe/io/uff.py"
     audit = "tests/cli/test_option_audit.py::test_option_changes_the_effect[model zpk --plot]"
     assert work_unit(audit) == audit
-    readme = "tests/cli/test_model_cli.py::test_readme_command_runs_as_subprocess"
+    readme = "tests/cli/test_model_cli.py::test_readme_command_runs"
     assert work_unit(readme + "[cappe model show builtin:two-mass-rig]") == readme
     assert work_unit("tests/cli/test_model_cli.py::test_show_json_contract") == (
         "tests/cli/test_model_cli.py::test_show_json_contract")
