@@ -363,6 +363,28 @@ def test_two_step_inverts_the_first_order_hold(two_mass):
             assert worst < limit, est.parameters
 
 
+@pytest.mark.slow  # three two-step fits of 6000 samples: ~20 s
+def test_two_step_with_two_forces_shares_the_poles_across_the_inputs(two_mass):
+    """lsim records, F1 + F2, 5 % noise, ``foh``. Step 1 was one discrete OE model per output with a denominator per
+    input: on d2 the F2 path, which excites the 181 Hz mode weakly, put that mode elsewhere (a local minimum: the
+    restart from F1's denominator had a 0.3 % lower loss; or noise that fits better there), and the second step
+    FAILED its chi-square test on 8 of 10 bench records with errors up to 135 % (here: chi2 1549 and 2.1e6, errors 31
+    and 150 %). Step 1 is now the continuous model with the poles shared by the inputs, simulated with the linear
+    input, as for a band-limited one; its natural frequencies stay below the Nyquist frequency (seed 2 found d2's
+    181 Hz mode aliased at 1819 Hz without that bound: chi2 2e8)."""
+    for seed, methods in ((1, ("two-step-tf",)), (2, ("two-step-tf", "two-step-zp"))):
+        rng = np.random.default_rng(seed)
+        f = _force(N, FS, 700.0, rng, inputs=2)
+        data = _record(f, _lsim(TRUTH, f), 0.05, rng)
+        for method in methods:
+            est = _fit(two_mass, method, data, intersample="foh")
+            assert est.success, (seed, method, est.message)
+            assert est.diagnostics["second_step_test"]["passed"]
+            # one-step's worst error on the bench's ten such records is 0.28 %, two-step's now 0.32 %
+            worst = max(abs(v / TRUTH[n] - 1) for n, v in est.parameters.items())
+            assert worst < 0.01, (seed, method, est.parameters)
+
+
 def test_two_step_arx_route_refuses_a_non_held_input(two_mass):
     data = TimeData.from_rate(FS, {"F1": np.sin(np.arange(800.0)), "d1": np.cos(np.arange(800.0))})
     with pytest.raises(DataError, match="identification 'arx'.*assumes a held input; got intersample 'foh'"):
