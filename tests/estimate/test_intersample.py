@@ -282,7 +282,7 @@ def test_direct_fails_where_force_and_response_are_not_simultaneous(two_mass):
     residual test fails a fit (before: success with a WARNING line). Plain least squares is tested on the equation
     errors of an instrumental-variable solution and FAILS as well. The same record without the delay succeeds."""
     delayed = _daq_motion(0.3)
-    for instruments in ("model", None):
+    for instruments in ("model", None, "delayed"):
         est = _fit(two_mass, "direct", delayed, instruments=instruments, inputs=["F1"])
         assert any("correlate with input F1" in w for w in est.diagnostics["warnings"]), est.diagnostics["warnings"]
         assert est.diagnostics["residual_analysis"]["independent"] is False
@@ -316,7 +316,8 @@ def test_plain_least_squares_is_tested_on_instrumental_variable_errors(two_mass)
     failed every such record (seen: p ~ 1e-30). The errors tested are those of an instrumental-variable solution,
     which hold the noise only: the record passes and the estimate is a success."""
     est = _fit(two_mass, "direct", _lsim_motion(8, 0.05, N), inputs=["F1"])
-    assert "instrumental-variable (model) solution" in est.diagnostics["residuals_tested"]
+    assert "model-instrument estimate (3 iterations from least squares; the least-squares estimate's" in (
+        est.diagnostics["residuals_tested"])
     assert est.diagnostics["residual_analysis"]["independent"] is True
     assert not any("correlate with input" in w for w in est.diagnostics.get("warnings", []))
     assert est.success
@@ -332,6 +333,17 @@ def _lsim_motion(seed, noise, n):
     y = y + noise * np.sqrt(np.mean(y**2, axis=0)) * rng.standard_normal(y.shape)
     names = ["d1", "d2", "v1", "v2", "a1", "a2"]
     return TimeData.from_rate(FS, {"F1": f[:, 0], **{n: y[:, k] for k, n in enumerate(names)}})
+
+
+def test_delayed_instruments_are_tested_on_model_instrument_errors(two_mass):
+    """The delayed instruments are consistent but weak: their estimate's error enters the equation errors through the
+    regressors, which correlate with the force at lag 0, and testing those errors failed 13 of 20 lsim records at 5 %
+    noise (3 of 20 with F1 + F2 at 1 %) whose equations hold. The errors tested are those of the model-instrument
+    estimate (its iterations from least squares)."""
+    est = _fit(two_mass, "direct", _lsim_motion(202, 0.05, N), instruments="delayed", inputs=["F1"])
+    assert "the delayed-instrument estimate's own errors" in est.diagnostics["residuals_tested"]
+    assert est.diagnostics["residual_analysis"]["independent"] is True
+    assert est.success
 
 
 def test_direct_force_independence_fails_at_its_stated_level(two_mass):
