@@ -227,7 +227,8 @@ FALSE_ALARM_SETTINGS = (("lsim", 0.01, 1, 0), ("lsim", 0.05, 1, 100), ("lsim", 0
 
 
 def run_false_alarm(records: int) -> list[dict[str, Any]]:
-    """How often direct's force-independence test warns where force and noise are independent.
+    """How often direct's force-independence test fails a fit (its WARNING line) where force and noise are
+    independent.
 
     Every record here satisfies the equations of motion at its samples (lsim and the non-delayed DAQ record: the
     anti-alias filter is the same linear filter on every channel), and its noise is drawn independently of the
@@ -334,7 +335,7 @@ def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, .
                             pairs += 1
                             worst = max(worst, abs(est.values[k] / TRUTH[name] - 1))
                         successes += bool(est.success)
-                        # a fit that succeeds with a WARNING line in its text (direct's force-independence test)
+                        # a fit with a WARNING line in its text (a failed residual test is one, and not a success)
                         warned += bool(est.diagnostics.get("warnings"))
                     row = {"method": method, "simulator": kind, "oversample": over, "noise": noise, "inputs": inputs,
                            "seeds": len(seeds), "coverage": covered / pairs, "worst_relative_error": worst,

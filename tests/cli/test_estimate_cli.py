@@ -142,8 +142,10 @@ def test_settings_reach_the_estimator(capsys, rig_data):
 
 def test_response_plot_before_and_after(capsys, tmp_path, rig_data):
     plot = tmp_path / "resp.png"
+    # the known dampings as simulated: with the model file's (c22 8.5x too small) the equations of motion do not hold
+    # and direct FAILS its force-independence test (exit 1)
     code, out, err = run(capsys, "estimate", "builtin:two-mass-rig", "--data", rig_data, "--method", "direct",
-                         "--unknowns", "k11,k22", "--plot-response", plot, "--json")
+                         "--unknowns", "k11,k22", "--set", "c11=20", "--set", "c22=4", "--plot-response", plot, "--json")
     assert code == 0, err
     assert json.loads(out)["diagnostics"]["plot_response"] == str(plot)
     assert plot.stat().st_size > 20000  # six panels of curves

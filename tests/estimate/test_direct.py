@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from cappe.estimate._direct import DirectEstimator
-from cappe.exceptions import DataError, DataWarning, ModelError, NotFittedError
+from cappe.exceptions import ConvergenceWarning, DataError, DataWarning, ModelError, NotFittedError
 from cappe.identify import random_noise
 from cappe.io.timedata import TimeData
 from cappe.model import NumericModel, load_model
@@ -97,7 +97,13 @@ def test_derive_missing_velocity_by_differentiation(rig):
     data = time_response(rig.system(TRUTH), _excitation(20000.0, 0.5, (1.0, 500.0), 3), outputs=["d1", "d2", "a1", "a2"])
     with pytest.raises(DataError, match=r"data lack the velocity of DOF\(s\) \['mass1.x', 'mass2.x'\] \(channels present: \[\]; add model output channel\(s\) \['v1', 'v2'\]\).*derive_missing=True"):
         DirectEstimator(rig).fit(data)
-    est = DirectEstimator(rig, derive_missing=True).fit(data)
+    with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+        est = DirectEstimator(rig, derive_missing=True).fit(data)
+    # noise-free: what is left of the equation errors is the derivation's error, which follows the forces (the ZOH
+    # steps, see the next test): the equations do not hold at the samples, the fit says so and is not a success
+    # (seen: m2 3.5 standard errors off)
+    assert not est.estimate_.success
+    assert est.estimate_.diagnostics["residual_analysis"]["independent"] is False
     # 4th-order central differences of the (smooth) displacement: relative error ~ (omega dt)^4 / 30 = 3e-7 at
     # 500 Hz and 20 kHz (7e-5 at the record's edge of band content); the damping forces are ~1 % of the others,
     # so c11 / c22 see ~100x that
@@ -113,7 +119,8 @@ def test_derive_missing_chains_differentiation(rig):
     # The ZOH force steps at every sample make the true acceleration jump there, which a difference quotient of
     # the velocity cannot follow (~1 % error at 20 kHz): a consistency check, not an accuracy claim
     data = time_response(rig.system(TRUTH), _excitation(20000.0, 0.5, (1.0, 500.0), 3), outputs=["d1", "d2"])
-    est = DirectEstimator(rig, derive_missing=True).fit(data)
+    with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+        est = DirectEstimator(rig, derive_missing=True).fit(data)  # the derivation errors follow the forces
     assert est.estimate_.diagnostics["derived"] == {
         "velocity": "differentiated from displacement",
         "acceleration": "differentiated from velocity",
@@ -124,7 +131,11 @@ def test_derive_missing_chains_differentiation(rig):
 
 def test_derive_missing_displacement_by_integration(rig):
     data = time_response(rig.system(TRUTH), _excitation(5000.0, 2.0, (5.0, 500.0), 4), outputs=["v1", "v2", "a1", "a2"])
-    est = DirectEstimator(rig, derive_missing=True).fit(data)
+    # the removed straight line is an equation error that follows the forces (seen: m1 60 standard errors off): the
+    # fit FAILS its force-independence test instead of claiming intervals that miss the truth
+    with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+        est = DirectEstimator(rig, derive_missing=True).fit(data)
+    assert not est.estimate_.success
     assert est.estimate_.diagnostics["derived"] == {
         "displacement": "integrated from velocity (straight line removed)"
     }
@@ -229,7 +240,11 @@ def test_estimate_outside_bounds_is_held_by_them_and_says_so(rig):
     # 2e-3: each path weights the DOFs by its own residuals, which moves k12 by 8e-4; clipping k11 alone would
     # leave m2 2.7 % away)
     others = [n for n in est.estimate_.names if n != "k11"]
-    fixed = DirectEstimator(rig, others, values={"k11": upper}).fit(data).params_
+    # k11 known at its bound is a wrong model of these data: the equations do not hold, and that fit FAILS (the
+    # bounded estimate itself is not failed: its unbounded solution fits, the bound's warning says the rest)
+    with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+        fixed = DirectEstimator(rig, others, values={"k11": upper}).fit(data).params_
+    assert res.success
     for name in others:
         np.testing.assert_allclose(est.params_[name], fixed[name], rtol=2e-3)
 

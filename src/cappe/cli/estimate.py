@@ -261,6 +261,8 @@ def _text(result: Any, method: str) -> str:
             f"{'yes' if analysis.get('independent') else 'NO'}; white "
             + ", ".join(f"{o} {'yes' if ok else 'NO'}" for o, ok in white.items())
         )
+        if isinstance(diagnostics.get("residuals_tested"), str):
+            lines.append(f"residuals tested: {diagnostics['residuals_tested']}")
     weighting = diagnostics.get("second_step_weighting")
     if isinstance(weighting, str):
         lines.append(f"second step weighted by: {weighting}")

@@ -98,7 +98,8 @@ class StudyResult:
             lines.append(f"{name:>10s} {self.truth[k]:11.5g}" + "".join(cells))
         failed = int((~self.success).sum())
         if failed:
-            lines.append(f"{failed} of {self.success.size} runs did not converge and are left out")
+            lines.append(f"{failed} of {self.success.size} runs were not a success (did not converge or failed a "
+                         "residual test) and are left out")
         return "\n".join(lines)
 
 

@@ -34,6 +34,14 @@ and its output errors go to the same residual tests as the OE route. A delay bet
 modelled (estimated per output it trades with the numerators' high coefficients): the residual tests and the
 chi-square test below have to catch it.
 
+**Step 1 for several inputs** (``zoh`` or ``foh``). The OE model has one denominator per input, the physics one for
+all: where an input excites a mode weakly, its path may place that mode elsewhere (on ``lsim`` records with F1 + F2
+and 5 % noise, d2's F2 path lost the rig's 181 Hz mode, and the second step FAILED its chi-square test on 8 of 10
+records). Step 1 then fits the same continuous model with shared poles, simulated with the held or linear input
+(the exact step of each mode, :func:`cappe.systems.statespace.hold_weights`; no feed-through where a held input
+reaches a displacement or velocity one sample late), from each input's OE poles, the lowest cost kept. Natural
+frequencies are bounded by the Nyquist frequency (above it a mode is an alias of one below at the samples).
+
 **Step 2 - matching.** The model's transfer functions at a parameter vector come from the exact polynomial form
 ``G(s) = S adj(Z(s)) B / det(Z(s))``, ``Z(s) = M s^2 + (C + G) s + K``: both polynomials are sampled on a circle of
 radius ``rho`` (the geometric mean natural frequency at the start) and their coefficients recovered by an FFT, which
@@ -518,13 +526,20 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
             y = data.channel(output)
             hold = "zoh" if est.intersample == "zoh" else "foh"
             names = [p.input for p in pairs if p.output == output]
-            if est.intersample == "bl":
-                # a band-limited input has no finite-order discrete equivalent: the linear interpolation's model
-                # gives the start of the continuous one, simulated as the DAQ recorded the input
-                with warnings.catch_warnings():
-                    warnings.simplefilter("ignore", IllConditionedWarning)
-                    start = np.concatenate([oe.continuous_poles(i) for i in inputs[:1]])
-                bl = _fit_band_limited(data, inputs, output, start)
+            if est.intersample == "bl" or len(inputs) > 1:
+                # a band-limited input has no finite-order discrete equivalent, and the OE model's denominators of
+                # several inputs are not shared: the continuous model with the physical poles shared by the inputs,
+                # simulated as the input behaves between the samples, from each input's OE poles (the lowest cost;
+                # band-limited: from the first input's, as measured in the README's tables)
+                bl: _BandLimitedOE | str = "no start"
+                for name in inputs if est.intersample != "bl" else inputs[:1]:
+                    with warnings.catch_warnings():
+                        warnings.simplefilter("ignore", IllConditionedWarning)
+                        start = oe.continuous_poles(name)
+                    trial = _fit_band_limited(data, inputs, output, start, est.intersample, feedthrough=nk == 0)
+                    if isinstance(bl, str) or (not isinstance(trial, str) and trial.errors @ trial.errors
+                                               < bl.errors @ bl.errors):
+                        bl = trial
                 if not isinstance(bl, str):
                     errors[output] = bl.errors
                     coef = bl.coefficients(bl.parameters_, names)
@@ -556,9 +571,18 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
     if est.intersample == "bl" and est.identification == "oe":
         source = ("continuous output-error model simulated with a band-limited input (time data)" if not fallback else
                   f"oe (time data), the first-order hold standing in for a band-limited input ({'; '.join(fallback)})")
+    elif len(inputs) > 1 and est.identification == "oe":
+        source = (f"continuous output-error model with poles shared by the inputs, simulated with a "
+                  f"{'held' if est.intersample == 'zoh' else 'linear'} input (time data)" if not fallback else
+                  f"oe (time data), one denominator per input ({'; '.join(fallback)})")
     tf_list = [tfs[p.label] for p in pairs]
-    warning = (f"step 1 fell back to the first-order hold's inverse for a band-limited input, which is biased (gain "
-               f"error ~(omega dt)^2 / 12): {'; '.join(fallback)}") if fallback else ""
+    warning = ""
+    if fallback and est.intersample == "bl":
+        warning = (f"step 1 fell back to the first-order hold's inverse for a band-limited input, which is biased "
+                   f"(gain error ~(omega dt)^2 / 12): {'; '.join(fallback)}")
+    elif fallback:
+        warning = (f"step 1 fell back to one output-error denominator per input, which need not share the poles: "
+                   f"{'; '.join(fallback)}")
     if est.identification != "oe":
         return _Step1(pairs, tf_list, source, tested,
                       no_covariance="the pruned ARX model (identification 'arx') has no covariance of its modes")
@@ -699,52 +723,76 @@ def _bl_poles(u: Array) -> CArray:
     return np.asarray(om * (-ze + 1j * np.sqrt(np.clip(1.0 - ze**2, 0.0, None))), dtype=complex)
 
 
-def _bl_basis(u_in: Array, u_nl: Array, dt: float) -> Array:
-    """Columns of the linear parameters of :class:`_BandLimitedOE` at the poles ``u_nl``."""
-    from cappe.systems.statespace import band_limited_modal_response
+def _bl_basis(u_in: Array, u_nl: Array, dt: float, intersample: str = "bl") -> Array:
+    """Columns of the linear parameters of :class:`_BandLimitedOE` at the poles ``u_nl``: each mode's response to
+    each input simulated with the input's behaviour between the samples (band-limited: the DFT response of
+    :func:`band_limited_modal_response`; held or linear: the exact step of :func:`hold_weights`, the record
+    starting at rest, any other start being a free response)."""
+    from scipy.signal import lfilter
+
+    from cappe.systems.statespace import band_limited_modal_response, hold_weights
 
     m = u_nl.size // 2
     lam = _bl_poles(u_nl)
     eye = np.eye(m)
     cm = np.vstack([eye, -1j * eye])  # Re z_r, Im z_r
-    cols = [band_limited_modal_response(lam, np.ones((m, 1)), cm, np.zeros((2 * m, 1)), u_in[:, i: i + 1], dt)
-            for i in range(u_in.shape[1])]
+    if intersample == "bl":
+        cols = [band_limited_modal_response(lam, np.ones((m, 1)), cm, np.zeros((2 * m, 1)), u_in[:, i: i + 1], dt)
+                for i in range(u_in.shape[1])]
+    else:  # z[k] = e^{lam dt} z[k - 1] + w_now u[k - 1] + w_next u[k], per mode
+        w_now, w_next = hold_weights(lam, dt, intersample)
+        mu = np.exp(lam * dt)
+        cols = []
+        for i in range(u_in.shape[1]):
+            z = np.column_stack([lfilter([w_next[r], w_now[r]], [1.0, -mu[r]], u_in[:, i].astype(complex))
+                                 for r in range(m)])
+            cols.append(np.hstack([z.real, z.imag]))
     free = np.exp(np.outer(np.arange(u_in.shape[0]) * dt, lam))
     feed = [u_in[:, i: i + 1] for i in range(u_in.shape[1])]
     per_input = [block for pair in zip(cols, feed, strict=True) for block in pair]
     return np.hstack([*per_input, np.ones((u_in.shape[0], 1)), free.real, free.imag])
 
 
-def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start: CArray) -> _BandLimitedOE | str:
+def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start: CArray,
+                      intersample: str = "bl", *, feedthrough: bool = True) -> _BandLimitedOE | str:
     """Step 1 for a band-limited input: :class:`_BandLimitedOE` by separable least squares (the linear parameters
     solved at every poles-and-delay vector, which scipy's trust region searches from ``start``: the poles of the
     first-order-hold stand-in, ~1 % off), with its Gauss-Newton covariance ``s^2 (J^T J)^-1`` over every parameter
     (:func:`jacobian_uncertainty`; the Jacobian of the poles by central differences); no covariance, and why, where
     the record leaves a combination of the parameters undetermined. Returns why not where the start has no complex
-    pole pairs."""
+    pole pairs. The same model simulated with a held or linear input (``intersample``) is step 1 of several inputs:
+    their poles shared; ``feedthrough=False`` holds the feed-throughs at 0 (a held input reaching a displacement or
+    velocity one sample late: the continuous model is strictly proper), with no variance."""
     from scipy.optimize import least_squares
 
     upper = start[start.imag > 0]
     if upper.size == 0 or upper.size * 2 != start.size or np.any(upper.real >= 0):
-        return "the first-order-hold stand-in has real or unstable poles: no start for the band-limited step 1"
+        return (f"the {'first-order-hold stand-in' if intersample == 'bl' else 'output-error model'} has real or "
+                f"unstable poles: no start for the {'band-limited ' if intersample == 'bl' else 'continuous '}step 1")
     upper = np.sort_complex(upper)
     om = np.abs(upper)
     ze = np.clip(-upper.real / om, 1e-6, 0.99)
-    u0 = np.concatenate([np.log(om), np.log(ze)])
     m = upper.size
     lo = np.full(2 * m, -np.inf)
-    hi = np.concatenate([np.full(m, np.inf), np.full(m, np.log(0.999))])
+    # natural frequencies below the Nyquist frequency: a mode above it is an alias of one below at the samples (an
+    # lsim record, F1 + F2, 5 % noise: d2's 181 Hz mode went to 1819 Hz, chi2 2e8 in the second step)
+    hi = np.concatenate([np.full(m, np.log(np.pi / data.dt)), np.full(m, np.log(0.999))])
+    u0 = np.minimum(np.concatenate([np.log(om), np.log(ze)]), hi - 1e-9)
     y = data.channel(output)
     scale = max(float(np.sqrt(np.mean((y - y.mean()) ** 2))), 1e-300)
     yn = y / scale
     u_in = np.column_stack([data.channel(i) for i in inputs])
     dt = data.dt
+    keep = np.ones(len(inputs) * (2 * m + 1) + 1 + 2 * m, dtype=bool)  # the linear parameters solved for
+    if not feedthrough:
+        keep[[i * (2 * m + 1) + 2 * m for i in range(len(inputs))]] = False
 
     def solve(u_nl: Array) -> tuple[Array, Array]:
-        phi = _bl_basis(u_in, u_nl, dt)
-        norm = np.sqrt(np.sum(phi**2, axis=0))
+        phi = _bl_basis(u_in, u_nl, dt, intersample)
+        norm = np.sqrt(np.sum(phi[:, keep] ** 2, axis=0))
         norm[norm == 0] = 1.0
-        c = np.linalg.lstsq(phi / norm, yn, rcond=None)[0] / norm
+        c = np.zeros(keep.size)
+        c[keep] = np.linalg.lstsq(phi[:, keep] / norm, yn, rcond=None)[0] / norm
         return phi, c
 
     def residuals(u_nl: Array) -> Array:
@@ -761,21 +809,26 @@ def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start:
         h = 1e-6 * max(1.0, abs(u_nl[j]))
         step = np.zeros_like(u_nl)
         step[j] = h
-        jac_nl[:, j] = (_bl_basis(u_in, u_nl + step, dt) @ c - _bl_basis(u_in, u_nl - step, dt) @ c) / (2 * h)
-    jac = np.hstack([jac_nl, phi])
+        jac_nl[:, j] = (_bl_basis(u_in, u_nl + step, dt, intersample) @ c
+                        - _bl_basis(u_in, u_nl - step, dt, intersample) @ c) / (2 * h)
+    jac = np.hstack([jac_nl, phi[:, keep]])
     norm = np.sqrt(np.sum(jac**2, axis=0))
     norm[norm == 0] = 1.0
     theta = np.concatenate([u_nl, c])
+    solved = np.concatenate([np.ones(u_nl.size, dtype=bool), keep])
     # the one home of the Gauss-Newton covariance, with unit-norm columns for the rank decision: the linear
     # parameters (residues, offset, initial state) may lie near 0, where relative scaling would invent a null space
-    unc = jacobian_uncertainty(names=_bl_names(inputs, m), values=theta, jacobian=jac, residuals=errors,
-                               scale=1.0 / norm)
+    unc = jacobian_uncertainty(names=[n for n, k in zip(_bl_names(inputs, m), solved, strict=True) if k],
+                               values=theta[solved], jacobian=jac, residuals=errors, scale=1.0 / norm)
     if not np.all(unc.identifiable) or not np.all(np.isfinite(unc.covariance)):
         # a pseudo-inverse would give the undetermined direction no variance, and the weighted second step would
         # read it as known exactly: the coefficients are kept, the weighting is refused with the combination
         return _BandLimitedOE(tuple(inputs), m, dt, scale, theta, None, errors, no_covariance=(
-            f"the band-limited step 1 does not determine {'; '.join(unc.combinations) or 'all its parameters'}"))
-    return _BandLimitedOE(tuple(inputs), m, dt, scale, theta, unc.covariance, errors)
+            f"the {'band-limited ' if intersample == 'bl' else ''}step 1 does not determine "
+            f"{'; '.join(unc.combinations) or 'all its parameters'}"))
+    cov = np.zeros((theta.size, theta.size))
+    cov[np.ix_(solved, solved)] = unc.covariance
+    return _BandLimitedOE(tuple(inputs), m, dt, scale, theta, cov, errors)
 
 
 def _bl_names(inputs: Sequence[str], m: int) -> list[str]:
