@@ -204,6 +204,17 @@ outputs:
 """
 
 
+def test_inputs_given_as_text_are_channel_names(rig):
+    # what `cappe estimate --setting inputs=F1` passes: one text, not its characters ('F', '1' were refused)
+    clean = time_response(rig.system(TRUTH), _excitation(2000.0, 0.5, None, 1))
+    as_list = DirectEstimator(rig, inputs=["F1", "F2"]).fit(clean).estimate_
+    as_text = DirectEstimator(rig, inputs="F1, F2").fit(clean).estimate_
+    np.testing.assert_array_equal(as_text.values, as_list.values)
+    assert as_text.diagnostics["inputs"] == ["F1", "F2"]
+    with pytest.raises(DataError, match=r"\['F9'\] are not inputs"):
+        DirectEstimator(rig, inputs="F9").fit(clean)
+
+
 def test_nonlinear_preload_by_gauss_newton():
     nm = NumericModel(structure_from_yaml(NONLINEAR_RIG))
     truth = {"preload": 1.7, "m1": 1.25, "k12": 0.15e6}

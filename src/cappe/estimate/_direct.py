@@ -68,6 +68,7 @@ from scipy.optimize import least_squares, lsq_linear
 
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, with_residual_tests
+from cappe.estimate._one_step import channel_names
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
 from cappe.estimate._uncertainty import (
@@ -102,9 +103,9 @@ class DirectEstimator(Estimator):
         unknowns lies outside them, the estimate is the optimum within them (bounded-variable least squares), its
         unknowns at a bound are flagged without an interval and the unbounded values are said in a warning; they
         bound the Gauss-Newton search of non-linear unknowns.
-    inputs : sequence of str, optional
-        Model inputs that act during the measurement; each needs a force channel of that name. Default: every
-        model input. Inputs left out are taken as zero.
+    inputs : sequence of str or str, optional
+        Model inputs that act during the measurement; each needs a force channel of that name (a text is one name
+        or several separated by commas). Default: every model input. Inputs left out are taken as zero.
     position : mapping, optional
         Axis positions of the model (default: the model's nominal ones).
     instruments : {None, "model", "delayed"}
@@ -151,7 +152,7 @@ class DirectEstimator(Estimator):
         start: Mapping[str, float] | None = None,
         values: Mapping[str, float] | None = None,
         rng: RandomLike = None,
-        inputs: Sequence[str] | None = None,
+        inputs: Sequence[str] | str | None = None,
         position: Mapping[str, float] | None = None,
         instruments: str | None = None,
         delay: int = 1,
@@ -433,9 +434,9 @@ class DirectEstimator(Estimator):
 # data
 
 
-def _forces(system: Any, data: TimeData, inputs: Sequence[str] | None) -> tuple[Array, tuple[str, ...]]:
+def _forces(system: Any, data: TimeData, inputs: Sequence[str] | str | None) -> tuple[Array, tuple[str, ...]]:
     """Force channels (n_inputs_used, n_samples) of the acting model inputs."""
-    names = tuple(system.input_names) if inputs is None else tuple(inputs)
+    names = tuple(system.input_names) if inputs is None else tuple(channel_names(inputs))
     unknown = [n for n in names if n not in system.input_names]
     if unknown:
         msg = f"inputs {unknown} are not inputs of model '{system.name}'; its inputs are {list(system.input_names)}"

@@ -180,6 +180,14 @@ def _physical(estimate: ParameterEstimate, n: int, nuisance: Mapping[str, Any]) 
     )
 
 
+def channel_names(requested: Sequence[str] | str) -> list[str]:
+    """Channel names given as a sequence, or as one text: ``"F1"`` or ``"F1,F2"`` (what ``--setting inputs=F1``
+    passes; iterated as a sequence it would be its characters)."""
+    if isinstance(requested, str):
+        return [name.strip() for name in requested.split(",")]
+    return list(requested)
+
+
 def _select(requested: Sequence[str] | str | None, model_names: tuple[str, ...], available: Sequence[str],
             what: str, source: str) -> list[str]:
     """Model inputs or outputs to use: the requested ones (each must be in the model and the data) or, by
@@ -192,7 +200,7 @@ def _select(requested: Sequence[str] | str | None, model_names: tuple[str, ...],
             )
             raise DataError(msg)
         return chosen
-    names = [requested] if isinstance(requested, str) else list(requested)
+    names = channel_names(requested)
     foreign = [n for n in names if n not in model_names]
     if foreign:
         msg = f"{what}s {foreign} are not {what}s of the model; its {what}s are {list(model_names)}"
