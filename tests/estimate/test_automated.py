@@ -159,13 +159,11 @@ def test_typed_result_is_the_document_it_writes(ideal, tmp_path):
     assert result.validation.held is est.validation_["validation"]
     assert len(result.validation.assignments) == len(result.validation.permuted) == 2
     assert result.joint.cost_function is est.cost_function_
-    # what the printed summary says of the uncertainty: typed fields, the same as the document's entries. On these
-    # noise-free modes the first fit runs to the round-off floor (relative stopping rules, issue 24), where the
-    # residuals have no scatter of their own to reweight by: the weights stay
+    # what the printed summary says of the uncertainty: typed fields, the same as the document's entries
     assert (result.joint.uncertainty, result.joint.weighting, result.joint.shapes) == (
         diag["uncertainty"]["std"], diag["weighting"], diag["shapes"]) == (
-        "larger of model-based and cluster-robust sandwich over 36 mode-position pairs", "weights", "real")
-    assert "scatter" not in diag
+        "larger of model-based and cluster-robust sandwich over 36 mode-position pairs",
+        "the residuals' own scatter per mode", "real")
     assert list(result.timings) == ["gsa", "stiffness_subproblems", "stiffness_refinement", "damping_least_squares",
                                     "joint_refinement", "validation", "total"]
     # the report reads the typed result; a bare estimate with the validation mapping still gives its sections
