@@ -349,10 +349,8 @@ def joint_refinement_step(setup: Setup, ident_ref: ModalData, current: Array, ca
     diagnostics: dict[str, Any] = {"modes": "exact", "jacobian": "analytic (eigen-decomposition perturbation)",
                                    "pairing_candidates": candidates}
     start = np.clip(current, space.lower, space.upper)
-    # the relative stopping rules only (gtol=None): scipy's gradient test is absolute in the residuals' size and
-    # stopped noise-free fits wherever the residuals became tiny, leaving the reweighted refits to finish (issue 24)
     fitted = least_squares_fit(setup.method, space, problem.residuals, problem.jacobian, starts=start[None, :],
-                               diagnostics=diagnostics, variance_floor=MODAL_VARIANCE_FLOOR, gtol=None)
+                               diagnostics=diagnostics, variance_floor=MODAL_VARIANCE_FLOOR)
     est = fitted.estimate
     values = np.asarray(est.values, dtype=float)
     weighting = problem.weighting
