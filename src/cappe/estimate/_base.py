@@ -342,7 +342,6 @@ def least_squares_fit(
     strategy: str | None = None,
     rng: RandomLike = None,
     variance_floor: float = 0.0,
-    gtol: float | None = 1e-8,
 ) -> Fitted:
     """:func:`fit_least_squares` with the cost it minimized: what an estimator's ``_fit`` returns so that
     :meth:`Estimator.cost_slice` can slice that cost (``cost`` is None where every start failed).
@@ -355,12 +354,6 @@ def least_squares_fit(
         Least residual variance the uncertainty uses where ``noise_variance`` is not given (residual units
         squared): the precision to which the residuals are computed, so that a fit to noise-free data does not
         claim intervals narrower than the arithmetic that found its optimum.
-    gtol : float or None
-        scipy's gradient tolerance of the trust-region search (its default 1e-8). With ``x_scale="jac"`` its test is
-        ``||r|| max_j cos(r, J_j) < gtol``: absolute in the residuals' size, so a fit whose residuals become tiny
-        (noise-free data, small weights) stops there however far from its optimum. None leaves the relative rules
-        alone (``ftol``: the cost's relative decrease, ``xtol``: the relative step), which do not depend on the
-        residuals' scale.
 
     Returns
     -------
@@ -409,7 +402,7 @@ def least_squares_fit(
         u0 = np.clip(space.to_internal(p0), lo, hi)
         try:
             sol = least_squares(fun, u0, jac=jac, bounds=(lo, hi), x_scale=x_scale, max_nfev=max_nfev,
-                                method="trf", gtol=gtol)
+                                method="trf")
         except (ValueError, np.linalg.LinAlgError) as exc:
             runs.append({"start": space.mapping(p0), "success": False, "message": str(exc)})
             continue
