@@ -531,6 +531,36 @@ def test_quadratic_exact_modes_equal_scipy_eig_of_the_state_matrix(slide, positi
                                atol=1e-10 * np.abs(full.complex_shapes).max())
 
 
+@pytest.mark.parametrize("steps", [1, 2])
+def test_quadratic_modes_iterate_side_by_side_each_at_its_own_pace(slide, steps, monkeypatch):
+    # issue 24 (speed): the modes of one vector run their inverse iterations side by side; with one or two steps per
+    # factorization some converge on their first shift while others shift again (counted: more factorizations than
+    # modes, fewer than every mode taking every shift), and each ends as if alone: equal to scipy's eig of the state
+    # matrix, and to the path with the default steps
+    import cappe.modal._engine as engine_module
+
+    model = NumericModel(slide)
+    p = random_params(model, 1, 11)[0]
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)  # 6 of 12 modes
+    default = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1).evaluate(p, {"z": 0.1}, exact=True)
+    monkeypatch.setattr(engine_module, "QUADRATIC_STEPS", steps)
+    factored = []
+    getrf = scipy.linalg.lapack.zgetrf
+
+    def counted(a, *args, **kwargs):
+        factored.append(np.shape(a))
+        return getrf(a, *args, **kwargs)
+
+    monkeypatch.setattr(scipy.linalg.lapack, "zgetrf", counted)
+    engine = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1)
+    batch = engine.evaluate(p, {"z": 0.1}, exact=True)
+    assert engine.exact_solves == {"quadratic": 1, "fallback": 0}
+    moving = int(np.count_nonzero(batch.poles[0]))
+    assert moving < len(factored) < engine_module.QUADRATIC_SHIFTS * moving
+    _assert_equal_to_the_state_matrix(model, p, {"z": 0.1}, batch)
+    np.testing.assert_allclose(batch.poles, default.poles, rtol=1e-12)  # both converged to round-off
+
+
 @pytest.mark.parametrize("split", [0.0, 1e-7, 1e-3])
 def test_quadratic_exact_modes_of_repeated_and_close_frequencies(split, monkeypatch):
     # issue 24: a mass on springs of (nearly) equal x and y stiffness, a damper at 30 degrees coupling x and y: the

@@ -280,39 +280,33 @@ class ExactModalProblem:
         names = [self.model.parameter_names[c] for c in columns]
         d = exact_mode_derivatives(self.engine, full, self.positions[k], poles=paired, parameters=names)
         lam_r, a = d.poles, d.shapes  # a: (n_s, m) complex sensor shapes (any scale)
-        d_shapes = list(d.d_shapes)
+        da = d.d_shapes  # (n_unknowns, n_s, m); every unknown at once below
         if self.shapes == "real":  # the realized shape Re(a exp(-i theta)), theta = arg(sum a^2) / 2, and its change
-            theta = 0.5 * np.angle(np.sum(a * a, axis=0))
-            turn = np.exp(-1j * theta)[None, :]
             total = np.sum(a * a, axis=0)
-            d_shapes = [((da - 1j * (0.5 * (2 * np.sum(a * da, axis=0) / total).imag)[None, :] * a) * turn).real
-                        .astype(complex) for da in d_shapes]
+            turn = np.exp(-0.5j * np.angle(total))[None, :]
+            d_theta = (np.sum(a[None] * da, axis=1) / total).imag  # (n_unknowns, m)
+            da = ((da - 1j * d_theta[:, None, :] * a[None]) * turn[None]).real.astype(complex)
             a = (a * turn).real.astype(complex)
         x = self.targets[k]
         c = np.sum(a.conj() * x, axis=0)  # a^H x per mode
         aa = np.sum(np.abs(a) ** 2, axis=0)
         w_abs = np.abs(lam_r)
         d_f, d_z, d_s = self.divisors[k]
-        rows_f, rows_z, rows_re, rows_im = [], [], [], []
-        for d_lam, da in zip(d.d_poles, d_shapes, strict=True):  # per unknown
-            d_abs = (lam_r.conj() * d_lam).real / w_abs
-            rows_f.append(d_abs / (2 * np.pi) / data_set.frequency)
-            d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
-            rows_z.append(d_zeta / data_set.damping if np.all(d_z > 0) else d_zeta)  # (an undamped reference: unused)
-            dc = np.sum(da.conj() * x, axis=0)
-            daa = 2 * np.sum((a.conj() * da).real, axis=0)
-            de = da * (c / aa)[None, :] + a * (dc / aa)[None, :] - a * (c * daa / aa**2)[None, :]
-            rows_re.append(de.real)
-            rows_im.append(de.imag)
+        d_lam = d.d_poles  # (n_unknowns, m)
+        d_abs = (lam_r.conj()[None, :] * d_lam).real / w_abs
+        d_zeta = -d_lam.real / w_abs + lam_r.real * d_abs / w_abs**2
         parts = []
         if np.all(d_f > 0):
-            parts.append(np.array(rows_f).T / d_f[:, None])  # (m, n_unknowns)
+            parts.append((d_abs / (2 * np.pi) / data_set.frequency).T / d_f[:, None])  # (m, n_unknowns)
         if np.all(d_z > 0):
-            parts.append(np.array(rows_z).T / d_z[:, None])
+            parts.append((d_zeta / data_set.damping).T / d_z[:, None])
         if np.all(d_s > 0):
-            for stack in (rows_re, rows_im) if self.shapes == "complex" else (rows_re,):
-                de_all = np.array(stack) / d_s[None, None, :]  # (n_unknowns, n_s, m)
-                parts.append(de_all.reshape(len(columns), -1).T)
+            dc = np.sum(da.conj() * x[None], axis=1)  # (n_unknowns, m)
+            daa = 2 * np.sum((a.conj()[None] * da).real, axis=1)
+            de = (da * (c / aa)[None, None, :] + a[None] * (dc / aa)[:, None, :]
+                  - a[None] * (c * daa / aa**2)[:, None, :]) / d_s[None, None, :]  # (n_unknowns, n_s, m)
+            for part in (de.real, de.imag) if self.shapes == "complex" else (de.real,):
+                parts.append(part.reshape(len(columns), -1).T)
         return np.concatenate(parts, axis=0)
 
     def _layout(self) -> tuple[NDArray[np.intp], NDArray[np.intp], Array, Array]:

@@ -433,7 +433,9 @@ def exact_mode_derivatives(
 def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, picked: NDArray[np.intp], full: Array,
                                 position: Mapping[str, float] | None, names: tuple[str, ...]) -> ExactModeDerivatives:
     """:func:`exact_mode_derivatives` of the modes ``picked`` of the quadratic-eigenproblem solution ``modes``: per
-    mode one LU of the bordered system (module notes), every parameter at once."""
+    mode one LU of the bordered system (module notes), every parameter at once. The bordered matrices and right-hand
+    sides of all modes are formed at once, in the Fortran order LAPACK takes without a copy; the per-mode work is the
+    ``getrf`` and its two ``getrs`` alone, and the gauge and the sensor rows are one product for all modes."""
     model = engine.model
     mats = modes.mats
     mass, visc = mats["M"], mats["C"] + mats["G"]
@@ -442,48 +444,52 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
     n, n_p, m = model.n_dof, len(names), picked.size
     lam_r = modes.poles[picked]
     x_all = modes.shapes[:, picked]
-    # dX x per parameter for every picked mode, (n_p, n, m), from the model's sparse patterns
-    products = model.matrix_derivative_products(full, position, x_all, parameters=list(names))
-    d_stiff_x = products["K"] + 1j * products["H"]
-    d_visc_x = products["C"] + products["G"]
-    d_mass_x = products["M"]
-    flat = np.stack([mass, visc, stiff]).astype(complex).reshape(3, n * n)  # Q(s) = (s^2, s, 1) @ flat
-    # u^T M and u^T (C + G) in one product with complex operands (a real matrix times a complex vector is copied)
-    mass_visc = np.concatenate([mass, visc], axis=1).astype(complex)
-    biggest = (float(np.abs(mass).max()), float(np.abs(visc).max()), float(np.abs(stiff).max()))
-    # -dQ x per mode, laid out (m, n, n_p) for the right-hand sides
-    d_x = [np.ascontiguousarray(a.transpose(2, 1, 0)) for a in (d_mass_x, d_visc_x, d_stiff_x)]
-    getrf, getrs = scipy.linalg.lapack.zgetrf, scipy.linalg.lapack.zgetrs
     d_poles = np.zeros((n_p, m), dtype=complex)
-    dx_all = np.zeros((n, n_p, m), dtype=complex)
-    border = np.zeros((n + 1, n + 1), dtype=complex)
-    unit = np.zeros(n + 1, dtype=complex)
-    unit[n] = 1.0
-    rhs = np.zeros((n + 1, n_p), dtype=complex)
-    for j in np.flatnonzero(lam_r != 0):  # rigid-body modes keep pole 0 and their real shape: derivatives 0
-        s, x = complex(lam_r[j]), x_all[:, j]
+    d_shapes = np.zeros((n_p, sensors.shape[0], m), dtype=complex)
+    moving = np.flatnonzero(lam_r != 0)  # rigid-body modes keep pole 0 and their real shape: derivatives 0
+    if moving.size:
+        s, x, k = lam_r[moving], x_all[:, moving], moving.size
+        # dX x per parameter for every moving mode, from the model's sparse patterns: (n_p, n, k) each
+        products = model.matrix_derivative_products(full, position, x, parameters=list(names))
+        ss = s[:, None, None]
+
+        def per_mode(a: Array) -> Array:  # (n_p, n, k) -> (k, n_p, n)
+            return np.asarray(a).transpose(2, 0, 1)
+
+        # -dQ x, laid out (k, n_p, n + 1): rhs[j].T is mode j's (n + 1, n_p) right-hand side in Fortran order
+        rhs = np.zeros((k, n_p, n + 1), dtype=complex)
+        rhs[:, :, :n] = -(ss * ss * per_mode(products["M"]) + ss * per_mode(products["C"] + products["G"])
+                          + per_mode(products["K"]) + 1j * per_mode(products["H"]))
+        # the bordered matrices, transposed (C order): [[Q(s), Q'(s) x], [x^H scaled, 0]]^T per mode
+        flat_t = np.stack([mass.T, visc.T, stiff.T]).astype(complex).reshape(3, n * n)  # Q(s)^T = (s^2, s, 1) @ flat_t
+        border_t = np.zeros((k, n + 1, n + 1), dtype=complex)
+        border_t[:, :n, :n] = (np.stack([s * s, s, np.ones(k)], axis=1) @ flat_t).reshape(k, n, n)
         mx = mass @ x
-        border[:n, :n] = (np.array([s * s, s, 1.0]) @ flat).reshape(n, n)  # Q(s)
-        border[:n, n] = 2 * s * mx + visc @ x  # Q'(s) x
+        border_t[:, n, :n] = (2 * s * mx + visc @ x).T  # Q'(s) x
         # the normalization row x^H dx = 0, scaled to Q's entries (partial pivoting compares rows)
-        size = abs(s) ** 2 * biggest[0] + abs(s) * biggest[1] + biggest[2]
-        border[n, :n] = size * x.conj() / np.vdot(x, x)
-        border[n, n] = 0.0
-        lu, piv, info = getrf(border)
-        if info != 0:
-            msg = f"the bordered system of mode {j + 1} is singular (a repeated pole)"
-            raise ModelError(msg)
-        left = getrs(lu, piv, unit, trans=1)[0][:n]  # u^T Q(s) = 0, u^T Q'(s) x = 1
-        rhs[:n] = -(s * s * d_x[0][j] + s * d_x[1][j] + d_x[2][j])  # -dQ x, (n, n_p)
-        solved = getrs(lu, piv, rhs)[0]
-        dx, ds = solved[:n], solved[n]
-        # the state expansion's gauge: w dv = u^T Q'(s) dx + ds u^T M x = 0
-        left_mass, left_visc = np.split(left @ mass_visc, 2)
-        dx += x[:, None] * (-((2 * s * left_mass + left_visc) @ dx + ds * (left_mass @ x)))[None, :]
-        d_poles[:, j] = ds
-        dx_all[:, :, j] = dx
-    d_shapes = np.asarray((sensors @ dx_all.reshape(n, n_p * m)).reshape(sensors.shape[0], n_p, m).transpose(1, 0, 2),
-                          dtype=complex)
+        biggest = (float(np.abs(mass).max()), float(np.abs(visc).max()), float(np.abs(stiff).max()))
+        size = np.abs(s) ** 2 * biggest[0] + np.abs(s) * biggest[1] + biggest[2]
+        border_t[:, :n, n] = (size / np.sum(np.abs(x) ** 2, axis=0))[:, None] * x.conj().T
+        getrf, getrs = scipy.linalg.lapack.zgetrf, scipy.linalg.lapack.zgetrs
+        unit = np.zeros(n + 1, dtype=complex)
+        unit[n] = 1.0
+        left = np.empty((k, n), dtype=complex)
+        for j in range(k):
+            lu, piv, info = getrf(border_t[j].T, overwrite_a=True)
+            if info != 0:
+                msg = f"the bordered system of mode {moving[j] + 1} is singular (a repeated pole)"
+                raise ModelError(msg)
+            left[j] = getrs(lu, piv, unit, trans=1)[0][:n]  # u^T Q(s) = 0, u^T Q'(s) x = 1
+            rhs[j] = getrs(lu, piv, rhs[j].T, overwrite_b=True)[0].T
+        dx, ds = rhs[:, :, :n], rhs[:, :, n]  # (k, n_p, n), (k, n_p)
+        # the state expansion's gauge: w dv = u^T Q'(s) dx + ds u^T M x = 0, a multiple of x added to dx
+        left_mv = left @ np.concatenate([mass, visc], axis=1)
+        left_mass, left_visc = left_mv[:, :n], left_mv[:, n:]
+        gauge = 2 * s[:, None] * left_mass + left_visc  # u^T Q'(s), (k, n)
+        along = -(np.einsum("jn,jpn->jp", gauge, dx) + ds * np.einsum("jn,nj->j", left_mass, x)[:, None])
+        dx += along[:, :, None] * x.T[:, None, :]
+        d_poles[:, moving] = ds.T
+        d_shapes[:, :, moving] = (dx @ sensors.T).transpose(1, 2, 0)
     return ExactModeDerivatives(
         poles=lam_r,
         shapes=sensors @ x_all,

@@ -1324,21 +1324,22 @@ class QuadraticModes:
         norms = (float(np.abs(mass).sum(axis=0).max()), float(np.abs(visc).sum(axis=0).max()),
                  float(np.abs(stiff).sum(axis=0).max()))
         stack = np.concatenate([mass, visc, stiff]).astype(complex)
-        m = phi.shape[1]
-        poles = np.zeros(m, dtype=complex)
+        poles = np.zeros(phi.shape[1], dtype=complex)
         shapes = phi.astype(complex)
-        for r in np.flatnonzero(omega > 0):
-            if not 0.0 <= zeta[r] < 1.0:  # overdamped to first order: the full eig judges
+        moving = np.flatnonzero(omega > 0)
+        if moving.size:
+            w, z = omega[moving], zeta[moving]
+            if not np.all((z >= 0.0) & (z < 1.0)):  # overdamped to first order: the full eig judges
                 return None
-            s0 = omega[r] * complex(-zeta[r], np.sqrt(1.0 - zeta[r] ** 2))
-            found = _quadratic_mode(stack, phi[:, r], s0, norms)
+            found = _quadratic_modes(stack, phi[:, moving], w * (-z + 1j * np.sqrt(1.0 - z * z)), norms)
             if found is None:
                 return None
-            lam, x = found
-            overlap = (mass @ phi[:, r]) @ x
-            if lam.imag <= 0 or abs(overlap) ** 2 < 0.5 * float(np.vdot(x, mass @ x).real):
+            lam, x = found  # (k,), (k, n): one mode per row
+            overlap = np.einsum("ij,ji->i", x, mass @ phi[:, moving])  # phi_r^T M x_r
+            energy = np.einsum("ij,ij->i", x.conj(), x @ mass.T).real  # x_r^H M x_r
+            if np.any(lam.imag <= 0) or np.any(np.abs(overlap) ** 2 < 0.5 * energy):
                 return None
-            poles[r], shapes[:, r] = lam, x / overlap
+            poles[moving], shapes[:, moving] = lam, (x / overlap[:, None]).T
         upper = poles[omega > 0]
         if upper.size > 1:
             gap = np.abs(upper[:, None] - upper[None, :]) + np.diag(np.full(upper.size, np.inf))
@@ -1352,46 +1353,76 @@ QUADRATIC_SHIFTS = 4
 QUADRATIC_STEPS = 8
 
 
-def _quadratic_mode(stack: NDArray[np.complex128], x0: Array, s0: complex,
-                    norms: tuple[float, float, float]) -> tuple[complex, NDArray[np.complex128]] | None:
-    """One mode of ``(s^2 M + s D + S) x = 0`` by shifted inverse iteration from ``(s0, x0)`` (see
-    :class:`QuadraticModes`; ``stack`` is ``[M; D; S]``, (3 n, n) complex): the pole and its shape (largest
-    component 1), or None without convergence."""
+def _quadratic_modes(stack: NDArray[np.complex128], x0: Array, s0: NDArray[np.complex128],
+                     norms: tuple[float, float, float]) -> tuple[NDArray[np.complex128], NDArray[np.complex128]] | None:
+    """The modes of ``(s^2 M + s D + S) x = 0`` by shifted inverse iteration, mode r from ``(s0[r], x0[:, r])`` (see
+    :class:`QuadraticModes`; ``stack`` is ``[M; D; S]``, (3 n, n) complex): the poles (k,) and the shapes (k, n), one
+    per row with largest component 1; None if a mode does not converge.
+
+    The modes iterate side by side, each with its own shift, LU and convergence as if alone (one LAPACK ``getrf``
+    per shift and one ``getrs`` per step and mode); the products with ``M, D, S``, the Rayleigh functionals and the
+    backward errors of a step are one matrix operation for all modes.
+    """
     getrf, getrs = scipy.linalg.lapack.zgetrf, scipy.linalg.lapack.zgetrs
-    n = stack.shape[1]
-    flat = stack.reshape(3, n * n)  # Q(s) = (s^2, s, 1) @ flat: one product instead of three scaled copies
-    x = x0.astype(complex)
-    x /= x[np.argmax(np.abs(x))]
-    lam = sigma = s0
-    mx, dx, sx = (stack @ x).reshape(3, n)
-    v_mass = lam * mx  # M v for the state vector (x, v = lam x)
+    n, k = x0.shape
+    # (s^2, s, 1) @ flat_t is Q(s)^T in C order, i.e. Q(s) in the Fortran order getrf takes without a copy
+    flat_t = np.ascontiguousarray(stack.reshape(3, n, n).transpose(0, 2, 1)).reshape(3, n * n)
+    stack_t = np.ascontiguousarray(stack.T)  # x (rows) @ stack_t = [M x, D x, S x]
+    x = np.array(x0.T, dtype=complex)  # (k, n)
+    x /= x[np.arange(k), np.argmax(np.abs(x), axis=1)][:, None]
+    lam, sigma = np.array(s0, dtype=complex), np.array(s0, dtype=complex)
+    prod = x @ stack_t  # (k, 3 n)
+    v_mass = lam[:, None] * prod[:, :n]  # M v for the state vectors (x, v = lam x)
+    out_lam, out_x = np.zeros(k, dtype=complex), np.zeros((k, n), dtype=complex)
+    done = np.zeros(k, dtype=bool)
     for _ in range(QUADRATIC_SHIFTS):
-        lu, piv, info = getrf((np.array([sigma * sigma, sigma, 1.0]) @ flat).reshape(n, n))
-        if info != 0:  # the shift is a pole to the last bit: no inverse
-            return None
-        best: tuple[float, complex, NDArray[np.complex128]] | None = None
+        live = np.flatnonzero(~done)
+        if live.size == 0:
+            break
+        coef = np.stack([sigma[live] ** 2, sigma[live], np.ones(live.size)], axis=1)
+        factors: dict[int, tuple[Any, Any]] = {}
+        for r, q in zip(live, (coef @ flat_t).reshape(live.size, n, n), strict=True):
+            lu, piv, info = getrf(q.T, overwrite_a=True)
+            if info != 0:  # the shift is a pole to the last bit: no inverse
+                return None
+            factors[int(r)] = (lu, piv)
+        best = np.full(k, np.nan)  # backward error of this shift's converged modes (their pole and shape in out_*)
         for _ in range(QUADRATIC_STEPS):
-            z, info = getrs(lu, piv, -(v_mass + dx + sigma * mx))
-            pivot = z[np.argmax(np.abs(z))]
-            previous = mx / pivot  # M x_old, rescaled
-            x = z / pivot
-            mx, dx, sx = (stack @ x).reshape(3, n)
-            v_mass = previous + sigma * mx  # M (x_old + sigma z), rescaled
-            a, b, c = np.vdot(x, mx), np.vdot(x, dx), np.vdot(x, sx)
+            if live.size == 0:
+                break
+            rhs = -(v_mass[live] + prod[live, n:2 * n] + sigma[live, None] * prod[live, :n])
+            z = np.array([getrs(*factors[int(r)], b)[0] for r, b in zip(live, rhs, strict=True)])
+            pivot = z[np.arange(live.size), np.argmax(np.abs(z), axis=1)][:, None]
+            previous = prod[live, :n] / pivot  # M x_old, rescaled
+            x[live] = z / pivot
+            prod[live] = x[live] @ stack_t
+            mx, dx, sx = prod[live, :n], prod[live, n:2 * n], prod[live, 2 * n:]
+            v_mass[live] = previous + sigma[live, None] * mx  # M (x_old + sigma z), rescaled
+            a = np.einsum("ij,ij->i", x[live].conj(), mx)
+            b = np.einsum("ij,ij->i", x[live].conj(), dx)
+            c = np.einsum("ij,ij->i", x[live].conj(), sx)
             root = np.sqrt(b * b - 4 * a * c)
-            roots = ((-b + root) / (2 * a), (-b - root) / (2 * a))
-            lam = complex(min(roots, key=lambda s: abs(s - lam)))
-            residual = lam * lam * mx + lam * dx + sx
-            error = float(np.abs(residual).sum() / ((abs(lam) ** 2 * norms[0] + abs(lam) * norms[1] + norms[2])
-                                                    * np.abs(x).sum()))
-            if best is not None:  # one step past convergence (it polishes the last digits): the better of the two
-                return (lam, x) if error <= best[0] else (best[1], best[2])
-            if error <= QUADRATIC_TOLERANCE:
-                best = (error, lam, x)
-        if best is not None:
-            return best[1], best[2]
-        sigma = lam
-    return None
+            plus, minus = (-b + root) / (2 * a), (-b - root) / (2 * a)
+            lam[live] = np.where(np.abs(plus - lam[live]) <= np.abs(minus - lam[live]), plus, minus)
+            s = lam[live, None]
+            residual = s * s * mx + s * dx + sx
+            size = np.abs(lam[live]) ** 2 * norms[0] + np.abs(lam[live]) * norms[1] + norms[2]
+            error = np.abs(residual).sum(axis=1) / (size * np.abs(x[live]).sum(axis=1))
+            # one step past convergence (it polishes the last digits): the better of the two, and the mode is done
+            past = ~np.isnan(best[live])
+            better = past & (error <= best[live])
+            out_lam[live[better]], out_x[live[better]] = lam[live[better]], x[live[better]]
+            done[live[past]] = True
+            fresh = ~past & (error <= QUADRATIC_TOLERANCE)
+            best[live[fresh]] = error[fresh]
+            out_lam[live[fresh]], out_x[live[fresh]] = lam[live[fresh]], x[live[fresh]]
+            live = live[~past]
+        # converged on this shift's last step: its polished value; the others shift to their current pole
+        done[~np.isnan(best)] = True
+        sigma[~done] = lam[~done]
+    if not np.all(done):
+        return None
+    return out_lam, out_x
 
 
 def _exact_modes(
