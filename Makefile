@@ -9,7 +9,8 @@ STAMP := $(VENV)/.installed
 # slow cases (SPREAD in tests/conftest.py, whose scheduler `--dist loadgroup` selects): their tests go one by one to
 # whichever worker is free. `make test` leaves out the slow
 # end-to-end cases marked `extended` (a faster test covers each: see the marker's reason); `make test-slow` runs
-# them, `make test-all` everything (CI). `make test TEST_WORKERS=0` runs them in this one process.
+# them (before each stop), `make test-all` everything; CI (.ci/run) runs `make test`. `make test TEST_WORKERS=0`
+# runs them in this one process.
 TEST_WORKERS ?= auto
 PYTEST := $(BIN)/python -m pytest -q -n $(TEST_WORKERS) --dist loadgroup
 
