@@ -127,8 +127,20 @@ def test_the_forecasts_scale_term_adds_in_quadrature() -> None:
     assert wide.upper - wide.time == pytest.approx(np.hypot(plain.upper - plain.time, shift), rel=1e-9)
 
 
+_TWIN_CASES: dict[tuple[object, ...], tuple[Monitor, ShopFloor, object]] = {}
+
+
 def _twin_case(spindle: NumericModel, **mismatch: float):
-    """A chain and a baseline (with FRFs: the twin) from 24 healthy measurements of a mismatched generator."""
+    """A chain and a baseline (with FRFs: the twin) from 24 healthy measurements of a mismatched generator; made
+    once per mismatch (the twin is most of a test's time; the baseline is only read)."""
+    key = (id(spindle), *sorted(mismatch.items()))
+    if key not in _TWIN_CASES:
+        _TWIN_CASES[key] = _new_twin_case(spindle, **mismatch)
+    return _TWIN_CASES[key]
+
+
+def _new_twin_case(spindle: NumericModel, **mismatch: float):
+    """:func:`_twin_case` without the memory."""
     config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
                             band=(150.0, 1000.0))
     monitor = Monitor(config, spindle)

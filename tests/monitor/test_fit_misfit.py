@@ -24,7 +24,7 @@ def learned(spindle: NumericModel):
     config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
                             band=(150.0, 1000.0))
     monitor = Monitor(config, spindle)
-    healthy = simulate_scenario(config, "healthy", n=30, model=spindle, rng=11)
+    healthy = simulate_scenario(config, "healthy", n=16, model=spindle, rng=11)
     baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in healthy],
                                       conditions=[m.conditions for m in healthy])
     return monitor, healthy, baseline
