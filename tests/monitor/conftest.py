@@ -11,14 +11,26 @@ import pytest
 from _postgres import PostgresServer, find_server_binaries
 
 from cappe.model import NumericModel, load_model
+from cappe.monitor import MonitorConfig, default_config
 
 _DATABASE = "cappe_test"
+
+#: The output channels of :func:`spindle_config`.
+SPINDLE_OUTPUTS = ("sx", "sy", "hax", "hay", "haz", "htax")
 
 
 @pytest.fixture(scope="session")
 def spindle() -> NumericModel:
     """The compiled spindle-bearing model (immutable, shared by the session)."""
     return NumericModel(load_model("builtin:spindle-bearing"))
+
+
+@pytest.fixture(scope="session")
+def spindle_config(spindle: NumericModel) -> MonitorConfig:
+    """The spindle as the monitoring tests watch it: machine 'spindle-01', the six accelerometer and probe channels
+    sx, sy, hax, hay, haz, htax, 150-1000 Hz (a frozen config, shared by the session)."""
+    return default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=SPINDLE_OUTPUTS,
+                          band=(150.0, 1000.0))
 
 
 @pytest.fixture(scope="session")

@@ -15,19 +15,16 @@ from benchmarks._spindle_generator import ShopFloor
 from benchmarks.bench_small_change import detect, small_change_trials
 
 from cappe.model import NumericModel
-from cappe.monitor import Monitor, default_config, diagnose
+from cappe.monitor import Monitor, MonitorConfig, diagnose
 from cappe.monitor._baseline import MODEL_OFFSET_FACTOR, SIZE_SCALE_FLOOR, learn_baseline
 from cappe.monitor._chain import detectable_change
 from cappe.monitor._diagnosis import FaultHypothesis
 
-OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
-
 
 @pytest.fixture(scope="module")
-def chain(spindle: NumericModel):
+def chain(spindle: NumericModel, spindle_config: MonitorConfig):
     """The chain, the generator (exact model) and a baseline from one healthy day of it."""
-    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
+    config = spindle_config
     monitor = Monitor(config, spindle)
     floor = ShopFloor(config, spindle, rng=np.random.default_rng(5), sensor_lag=0.5)
     day = floor.run(96)
@@ -130,19 +127,18 @@ def test_the_forecasts_scale_term_adds_in_quadrature() -> None:
 _TWIN_CASES: dict[tuple[object, ...], tuple[Monitor, ShopFloor, object]] = {}
 
 
-def _twin_case(spindle: NumericModel, **mismatch: float):
+def _twin_case(spindle: NumericModel, spindle_config: MonitorConfig, **mismatch: float):
     """A chain and a baseline (with FRFs: the twin) from 24 healthy measurements of a mismatched generator; made
     once per mismatch (the twin is most of a test's time; the baseline is only read)."""
-    key = (id(spindle), *sorted(mismatch.items()))
+    key = (id(spindle), id(spindle_config), *sorted(mismatch.items()))
     if key not in _TWIN_CASES:
-        _TWIN_CASES[key] = _new_twin_case(spindle, **mismatch)
+        _TWIN_CASES[key] = _new_twin_case(spindle, spindle_config, **mismatch)
     return _TWIN_CASES[key]
 
 
-def _new_twin_case(spindle: NumericModel, **mismatch: float):
+def _new_twin_case(spindle: NumericModel, spindle_config: MonitorConfig, **mismatch: float):
     """:func:`_twin_case` without the memory."""
-    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
+    config = spindle_config
     monitor = Monitor(config, spindle)
     floor = ShopFloor(config, spindle, rng=np.random.default_rng(11), sensor_lag=0.5, **mismatch)
     day = floor.run(24)
@@ -160,11 +156,11 @@ def _sized(monitor: Monitor, floor: ShopFloor, baseline, fault: str, loss: float
     return diagnose(deviation, baseline.size_covariance(deviation), [hyp])
 
 
-def test_size_intervals_follow_what_is_off_not_the_offset(spindle: NumericModel) -> None:
+def test_size_intervals_follow_what_is_off_not_the_offset(spindle: NumericModel, spindle_config: MonitorConfig) -> None:
     # damping 30 % off barely moves the factors (offset about 0.5 %), yet a screw-1 loss is read about 8 % too small
     # on the independent generator: the offset rule gave +-0.9 % of the change and its 95 % interval missed the
     # truth; the twin (the model with one damping factor fitted to the healthy FRFs) measures the error per component
-    monitor, floor, baseline = _twin_case(spindle, damping_factor=1.3)
+    monitor, floor, baseline = _twin_case(spindle, spindle_config, damping_factor=1.3)
     assert baseline.model_offset < 0.01
     d = _sized(monitor, floor, baseline, "screw1", 0.25)
     assert abs(d.change + 0.25) > 0.005  # the error is real (about 3 % of the loss)
@@ -175,10 +171,10 @@ def test_size_intervals_follow_what_is_off_not_the_offset(spindle: NumericModel)
     assert scale["front"] < 0.02
 
 
-def test_a_mass_error_does_not_widen_the_size_intervals(spindle: NumericModel) -> None:
+def test_a_mass_error_does_not_widen_the_size_intervals(spindle: NumericModel, spindle_config: MonitorConfig) -> None:
     # masses 3 % off shift every factor by -3 % (a uniform mass error is a uniform stiffness-and-damping one) and
     # change the read sizes by less than 1 %: the offset rule widened every interval by 4.4 % of the change
-    monitor, floor, baseline = _twin_case(spindle, mass_error=0.03)
+    monitor, floor, baseline = _twin_case(spindle, spindle_config, mass_error=0.03)
     assert baseline.model_offset > 0.02
     for fault in ("front", "screw3"):
         d = _sized(monitor, floor, baseline, fault, 0.25)
@@ -187,10 +183,10 @@ def test_a_mass_error_does_not_widen_the_size_intervals(spindle: NumericModel) -
     assert baseline.size_scale_std < 0.02
 
 
-def test_the_twins_errors_round_trip(spindle: NumericModel) -> None:
+def test_the_twins_errors_round_trip(spindle: NumericModel, spindle_config: MonitorConfig) -> None:
     from cappe.monitor import Baseline
 
-    _, _, baseline = _twin_case(spindle, damping_factor=1.3)
+    _, _, baseline = _twin_case(spindle, spindle_config, damping_factor=1.3)
     again = Baseline.from_dict(baseline.to_dict())
     assert baseline.size_error is not None
     np.testing.assert_array_equal(again.size_error, baseline.size_error)

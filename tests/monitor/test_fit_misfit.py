@@ -14,15 +14,12 @@ import numpy as np
 import pytest
 
 from cappe.model import NumericModel
-from cappe.monitor import HistoryStore, Monitor, default_config, ingest, simulate_scenario
-
-OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
+from cappe.monitor import HistoryStore, Monitor, MonitorConfig, ingest, simulate_scenario
 
 
 @pytest.fixture(scope="module")
-def learned(spindle: NumericModel):
-    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
+def learned(spindle: NumericModel, spindle_config: MonitorConfig):
+    config = spindle_config
     monitor = Monitor(config, spindle)
     healthy = simulate_scenario(config, "healthy", n=16, model=spindle, rng=11)
     baseline = monitor.learn_baseline([monitor.analyse(m.frf, modal=False) for m in healthy],
@@ -38,7 +35,7 @@ def test_a_fit_that_does_not_describe_the_measurement_is_said(learned, tmp_path:
     m = simulate_scenario(monitor.config, "healthy", n=1, model=monitor.model, rng=12,
                           start=healthy[-1].timestamp + timedelta(minutes=15))[0]
     flipped = np.array(m.frf.H, copy=True)
-    flipped[OUTPUTS.index("hax")] *= -1.0
+    flipped[list(m.frf.output_names).index("hax")] *= -1.0
     with HistoryStore(tmp_path / "s.db") as store:
         store.add_machine("spindle-01", monitor.config.to_dict())
         store.set_baseline("spindle-01", baseline.to_dict())

@@ -17,10 +17,9 @@ from benchmarks._spindle_generator import ShopFloor
 
 from cappe.cli import main
 from cappe.model import NumericModel
-from cappe.monitor import Baseline, HistoryStore, Monitor, condition_rates, default_config, ingest, with_rates
+from cappe.monitor import Baseline, HistoryStore, Monitor, MonitorConfig, condition_rates, ingest, with_rates
 from cappe.monitor._baseline import RATE_GAP, learn_baseline
 
-OUTPUTS = ["sx", "sy", "hax", "hay", "haz", "htax"]
 LAG = 2.0  # minutes the sensor lags the bearing
 SENSITIVITY = 0.01  # ln-factor per K of the bearing temperature
 
@@ -89,13 +88,13 @@ def test_the_rate_term_survives_measurements_without_a_rate_and_reads_the_lag() 
     assert Baseline.from_dict(b.to_dict()).rate_terms == b.rate_terms
 
 
-def test_a_store_baseline_takes_the_rates_across_the_nights(spindle: NumericModel, tmp_path: Path, capsys) -> None:
+def test_a_store_baseline_takes_the_rates_across_the_nights(spindle: NumericModel, spindle_config: MonitorConfig,
+                                                             tmp_path: Path, capsys) -> None:
     # the store path: rates from each record's predecessor, none after the night; the term survives the three
     # mornings without a rate, and `monitor baseline` says it is in use
     rng = np.random.default_rng(6)
     times, sensor, true = _lagging_days(3, rng)
-    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
+    config = spindle_config
     names = Monitor(config, spindle).estimator.names
     bearings = np.isin(names, ["front", "rear"])
     logs = SENSITIVITY * (true[:, None] - 22.0) * bearings + 1e-4 * rng.standard_normal((true.size, len(names)))
@@ -128,10 +127,9 @@ def test_a_rate_term_that_does_not_fit_the_coefficients_is_malformed() -> None:
 
 
 @pytest.fixture(scope="module")
-def lagging(spindle: NumericModel):
+def lagging(spindle: NumericModel, spindle_config: MonitorConfig):
     """The chain, the independent generator with a 2-minute sensor lag, and a day's baseline with the rates."""
-    config = default_config(spindle, machine="spindle-01", source="builtin:spindle-bearing", outputs=OUTPUTS,
-                            band=(150.0, 1000.0))
+    config = spindle_config
     monitor = Monitor(config, spindle)
     floor = ShopFloor(config, spindle, rng=np.random.default_rng(5), sensor_lag=LAG)
     day = floor.run(96)
