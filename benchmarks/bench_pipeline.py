@@ -129,9 +129,9 @@ def child() -> dict[str, Any]:
 
 
 def _bare_seconds(kind: str, n: int, dtype: str, count: int, threads: int = 1) -> float:
-    """Batched LAPACK time of ``count`` solves of size ``n`` (BLAS on one thread), from a timed sample; with
-    ``threads``, the sample is solved by that many threads at once and the time is that of the whole count split
-    over them."""
+    """Batched LAPACK time of ``count`` solves of size ``n`` (BLAS on one thread: its CPU seconds), from a timed
+    sample; with ``threads``, the sample is solved by that many threads at once and the time is the wall time of the
+    whole count split over them."""
     from concurrent.futures import ThreadPoolExecutor
 
     from cappe.parallel import single_threaded_blas
@@ -161,11 +161,15 @@ def _bare_seconds(kind: str, n: int, dtype: str, count: int, threads: int = 1) -
     with single_threaded_blas(), ThreadPoolExecutor(threads) as pool:
         func(a[:2])
         list(pool.map(func, [a[:2]] * threads))  # threads started
+        # one thread: its CPU time, which other jobs on a shared machine do not stretch as they stretch the wall
+        # clock (a bound timed at load 11 came out 2.6x the quiet one: bench_three_axis, issue 24); several: the
+        # wall clock, since their joint throughput is what is measured
+        clock = time.process_time if threads == 1 else time.perf_counter
         seconds = float("inf")
         for _ in range(5):  # the best of five: the machine's load varies (the bound is the least time possible)
-            t0 = time.perf_counter()
+            t0 = clock()
             list(pool.map(func, [a] * threads))
-            seconds = min(seconds, time.perf_counter() - t0)
+            seconds = min(seconds, clock() - t0)
     return seconds * count / (sample * threads)
 
 
