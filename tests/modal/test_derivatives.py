@@ -211,6 +211,16 @@ def _gauge_free(shapes, d_shapes):
     return shapes / pivot, (d_shapes - shapes[None] * (d_pivot / pivot)[:, None, :]) / pivot
 
 
+def _assert_equal_to_the_reference(d, lam, shapes, d_poles, d_shapes) -> None:
+    """Poles and their derivatives, and the shapes and theirs free of the gauge, equal the reference to round-off."""
+    np.testing.assert_allclose(d.poles, lam, rtol=1e-12)
+    np.testing.assert_allclose(d.d_poles, d_poles, rtol=1e-9, atol=1e-11 * np.abs(d_poles).max())
+    unit, d_unit = _gauge_free(d.shapes, d.d_shapes)
+    unit_ref, d_unit_ref = _gauge_free(shapes, d_shapes)
+    np.testing.assert_allclose(unit, unit_ref, rtol=0, atol=1e-11)
+    np.testing.assert_allclose(d_unit, d_unit_ref, rtol=0, atol=1e-9 * np.abs(d_unit_ref).max())
+
+
 @pytest.mark.parametrize("reuse", [True, False])
 def test_exact_mode_derivatives_equal_the_full_expansion_to_round_off(slide, reuse):
     # issue 24: the derivatives reuse the engine's eigen-decomposition of the residuals' exact solve and take all
@@ -227,12 +237,7 @@ def test_exact_mode_derivatives_equal_the_full_expansion_to_round_off(slide, reu
     d = exact_mode_derivatives(engine, p, position, poles=poles, parameters=names)
     sensors = engine.sensor_rows(position)[1]
     lam, shapes, d_poles, d_shapes = _reference_exact_derivatives(model, p, position, poles, names, sensors)
-    np.testing.assert_allclose(d.poles, lam, rtol=1e-12)
-    np.testing.assert_allclose(d.d_poles, d_poles, rtol=1e-9, atol=1e-11 * np.abs(d_poles).max())
-    unit, d_unit = _gauge_free(d.shapes, d.d_shapes)
-    unit_ref, d_unit_ref = _gauge_free(shapes, d_shapes)
-    np.testing.assert_allclose(unit, unit_ref, rtol=0, atol=1e-11)
-    np.testing.assert_allclose(d_unit, d_unit_ref, rtol=0, atol=1e-9 * np.abs(d_unit_ref).max())
+    _assert_equal_to_the_reference(d, lam, shapes, d_poles, d_shapes)
 
 
 def test_the_exact_jacobian_reuses_the_residuals_eigen_decomposition(slide, monkeypatch):
@@ -278,12 +283,7 @@ def test_exact_mode_derivatives_on_the_quadratic_eigenproblem_equal_the_full_exp
     sensors = engine.sensor_rows(position)[1]
     lam, shapes, d_poles, d_shapes = _reference_exact_derivatives(model, p, position, poles[[4, 1, 2]], names,
                                                                    sensors)
-    np.testing.assert_allclose(d.poles, lam, rtol=1e-12)
-    np.testing.assert_allclose(d.d_poles, d_poles, rtol=1e-9, atol=1e-11 * np.abs(d_poles).max())
-    unit, d_unit = _gauge_free(d.shapes, d.d_shapes)
-    unit_ref, d_unit_ref = _gauge_free(shapes, d_shapes)
-    np.testing.assert_allclose(unit, unit_ref, rtol=0, atol=1e-11)
-    np.testing.assert_allclose(d_unit, d_unit_ref, rtol=0, atol=1e-9 * np.abs(d_unit_ref).max())
+    _assert_equal_to_the_reference(d, lam, shapes, d_poles, d_shapes)
     # the same gauge as the expansion: the derivatives of the shapes scaled as the reference's are the reference's
     scale = shapes[0] / d.shapes[0]
     np.testing.assert_allclose(d.d_shapes * scale[None, None, :], d_shapes, rtol=0,

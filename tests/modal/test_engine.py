@@ -365,6 +365,22 @@ def _flexible_with_dense_rows(n: int = 7, *, varying_mass: bool = False, lumped:
     return NumericModel(b.build())
 
 
+def _assert_numpy_modes(result, i, model, params):
+    """Sample ``i`` of an engine result equals numpy's undamped modes of the assembled matrices: frequencies,
+    phi^T C phi / 2 omega + phi^T H phi / 2 omega^2, and the sensor shapes up to sign; returns the mass-normalized
+    modes phi."""
+    system = model.system(params)
+    lam, phi = scipy.linalg.eigh(system.K, system.M)
+    omega = np.sqrt(lam)
+    zeta = (np.einsum("ij,ik,kj->j", phi, system.C, phi) / (2 * omega)
+            + np.einsum("ij,ik,kj->j", phi, system.H, phi) / (2 * omega**2))
+    np.testing.assert_allclose(result.frequency[i], omega / (2 * np.pi), rtol=1e-9)
+    np.testing.assert_allclose(result.damping[i], zeta, rtol=1e-8, atol=1e-12)
+    shapes = model.sensor_matrix()[1] @ phi
+    np.testing.assert_allclose(np.abs(result.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())
+    return phi
+
+
 def test_dense_rows_of_flexible_bodies_give_the_same_bits_in_any_chunk_and_the_numpy_damping():
     model = _flexible_with_dense_rows()
     engine = ModalEngine(model, n_workers=1, chunk_size=64)
@@ -425,15 +441,7 @@ def test_a_flexible_body_is_projected_without_forming_its_shapes_and_gives_the_n
     np.testing.assert_allclose(fused.shapes, full.shapes, rtol=1e-9, atol=1e-12 * np.abs(full.shapes).max())
     # and numpy's phi^T C phi / 2 omega + phi^T H phi / 2 omega^2 on the assembled matrices
     for i in range(len(params)):
-        system = model.system(params[i])
-        lam, phi = scipy.linalg.eigh(system.K, system.M)
-        omega = np.sqrt(lam)
-        zeta = (np.einsum("ij,ik,kj->j", phi, system.C, phi) / (2 * omega)
-                + np.einsum("ij,ik,kj->j", phi, system.H, phi) / (2 * omega**2))
-        np.testing.assert_allclose(fused.damping[i], zeta, rtol=1e-8, atol=1e-12)
-        np.testing.assert_allclose(fused.frequency[i], omega / (2 * np.pi), rtol=1e-9)
-        shapes = model.sensor_matrix()[1] @ phi
-        np.testing.assert_allclose(np.abs(fused.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())
+        _assert_numpy_modes(fused, i, model, params[i])
 
 
 @pytest.mark.parametrize(("n", "lumped"), [(7, False), (13, False), (7, True)])
@@ -467,16 +475,9 @@ def test_varying_masses_on_a_flexible_body_scale_the_nominal_factor_and_give_the
     # tracking orders the modes as the nominal reference does: the same set
     np.testing.assert_allclose(np.sort(tracked.frequency, axis=1), batch.frequency, rtol=1e-9)
     for i in range(len(params)):
+        # the same tolerances as the known-mass path's test above (rounding of the reductions, 1e-13 measured)
+        phi = _assert_numpy_modes(batch, i, model, params[i])
         system = model.system(params[i])
-        lam, phi = scipy.linalg.eigh(system.K, system.M)
-        omega = np.sqrt(lam)
-        zeta = (np.einsum("ij,ik,kj->j", phi, system.C, phi) / (2 * omega)
-                + np.einsum("ij,ik,kj->j", phi, system.H, phi) / (2 * omega**2))
-        # rtol: the same tolerances as the known-mass path's test above (rounding of the reductions, 1e-13 measured)
-        np.testing.assert_allclose(batch.frequency[i], omega / (2 * np.pi), rtol=1e-9)
-        np.testing.assert_allclose(batch.damping[i], zeta, rtol=1e-8, atol=1e-12)
-        shapes = model.sensor_matrix()[1] @ phi
-        np.testing.assert_allclose(np.abs(batch.shapes[i]), np.abs(shapes), rtol=1e-7, atol=1e-9 * np.abs(shapes).max())
         full = reference.full_shapes[i]
         np.testing.assert_allclose(np.abs(full), np.abs(phi), rtol=1e-7, atol=1e-9 * np.abs(phi).max())
         if i < 2:
