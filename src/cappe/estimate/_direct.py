@@ -230,6 +230,7 @@ class DirectEstimator(Estimator):
         jac = (a * weights[:, None, None]).reshape(-1, space.n)
         history: list[dict[str, float]] = [space.mapping(theta)]
         ls_fit = (theta, weights)
+        every_sample = (a, b)  # the delayed instruments drop the first samples; the tested errors take them all
         if self.instruments == "delayed":
             delay = int(self.delay)
             if delay >= b.shape[1] - space.n:
@@ -243,23 +244,18 @@ class DirectEstimator(Estimator):
                 theta, jac = _iv_solve(a, b, inst, weights, space.start)
                 history.append(space.mapping(theta))
         elif self.instruments == "model":
-            for _ in range(int(self.n_iter)):
-                try:
-                    simulated = eq.simulate(theta, data.time)
-                except (ModelError, np.linalg.LinAlgError, ValueError) as exc:
-                    warnings.warn(
-                        f"model instruments stopped: the model cannot be simulated at {space.mapping(theta)} "
-                        f"({exc}); the last estimate is kept",
-                        ConvergenceWarning,
-                        stacklevel=4,
-                    )
-                    break
-                weights = _residual_weights(a, b, theta, weights)
-                theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
-                history.append(space.mapping(theta))
+            theta, iv_jac, weights, stopped = self._model_instruments(space, eq, data, a, b, theta, weights, history)
+            jac = jac if iv_jac is None else iv_jac
+            if stopped is not None:
+                warnings.warn(
+                    f"model instruments stopped: the model cannot be simulated at {space.mapping(theta)} "
+                    f"({stopped}); the last estimate is kept",
+                    ConvergenceWarning,
+                    stacklevel=4,
+                )
         message = "linear least squares" if self.instruments is None else f"instrumental variables ({self.instruments})"
         tested, tested_weights, diagnostics["residuals_tested"] = self._tested_errors(
-            space, eq, data, a, b, (theta, weights) if self.instruments == "model" else ls_fit)
+            space, eq, data, *every_sample, (theta, weights) if self.instruments == "model" else ls_fit)
         outside = [
             n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True) if not lo <= v <= hi
         ]
@@ -316,6 +312,28 @@ class DirectEstimator(Estimator):
         return with_residual_tests(estimate, [tested.T], [eq.forces[:, eq.forces.shape[1] - tested.shape[1]:].T],
                                    list(eq.dofs), [eq.model.input_names[c] for c in eq.columns])
 
+    def _model_instruments(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array, b: Array,
+                           theta: Array, weights: Array, history: list[dict[str, float]] | None = None
+                           ) -> tuple[Array, Array | None, Array, Exception | None]:
+        """``n_iter`` model-instrument iterations from ``theta``: the instruments are the regressors of the model's
+        response simulated at the last estimate, the DOFs re-weighted by their residuals before each solve.
+
+        Returns the estimate, the last solve's Jacobian (None if none ran), the weights, and the error that stopped
+        the iterations where the model could not be simulated (None when all ran). Each estimate is appended to
+        ``history`` when given.
+        """
+        jac = None
+        for _ in range(int(self.n_iter)):
+            try:
+                simulated = eq.simulate(theta, data.time)
+            except (ModelError, np.linalg.LinAlgError, ValueError) as exc:
+                return theta, jac, weights, exc
+            weights = _residual_weights(a, b, theta, weights)
+            theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
+            if history is not None:
+                history.append(space.mapping(theta))
+        return theta, jac, weights, None
+
     def _tested_errors(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array, b: Array,
                        fit: tuple[Array, Array]) -> tuple[Array | None, Array, str]:
         """The weighted equation errors (n_dof, n_s) whose correlation with the forces tests the equations, their
@@ -337,14 +355,12 @@ class DirectEstimator(Estimator):
         if self.instruments == "model":
             return (np.asarray((b - a @ theta) * weights[:, None], dtype=float), weights,
                     "the equation errors of the estimate (instrumental variables, model)")
-        a, b = eq.regression(eq.motion)  # every sample (the delayed instruments drop the first ones)
         try:
-            for _ in range(int(self.n_iter)):
-                simulated = eq.simulate(theta, data.time)
-                weights = _residual_weights(a, b, theta, weights)
-                theta, _ = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
-        except (ModelError, np.linalg.LinAlgError, ValueError) as exc:
-            return None, weights, f"none: the model cannot be simulated at {space.mapping(theta)} ({exc})"
+            theta, _, weights, stopped = self._model_instruments(space, eq, data, a, b, theta, weights)
+        except (np.linalg.LinAlgError, ValueError) as exc:
+            stopped = exc
+        if stopped is not None:
+            return None, weights, f"none: the model cannot be simulated at {space.mapping(theta)} ({stopped})"
         if not np.all(np.isfinite(theta)):
             return None, weights, "none: the model-instrument solution is not finite"
         what = "least-squares" if self.instruments is None else "delayed-instrument"
