@@ -37,6 +37,10 @@ status 1), one WARNING line per failed pair. The errors tested are the model-ins
 ``instruments="model"``, those of the estimate reported; with plain least squares, whose own errors correlate with
 the forces through the errors-in-variables bias on every noisy record, and with the (weak) delayed instruments,
 those of the model-instrument estimate, iterated from least squares (``diagnostics["residuals_tested"]``).
+Unknowns that enter non-linearly are tested on the errors of the model-instrument estimate iterated from the
+Gauss-Newton one (the Jacobian of the equation errors on the simulated response as instruments). The verdict is that
+of the estimate reported: unknowns held at a bound keep their bound values in the tested solution (a bound that
+excludes the truth fails the fit), have no interval and are practically non-identifiable.
 Noise on the force channel enters the equation errors and the tested force alike, at lag 0 only and far below the
 bound: with 1, 5 and 10 % white force noise (and 1 % on the motion, model instruments) 1 of the same 10 ``lsim``
 records failed at each level, as without it.
@@ -67,7 +71,7 @@ from scipy.integrate import cumulative_simpson
 from scipy.optimize import least_squares, lsq_linear
 
 from cappe._rng import RandomLike
-from cappe.estimate._base import Estimator, with_residual_tests
+from cappe.estimate._base import Estimator, honest_intervals, with_residual_tests
 from cappe.estimate._one_step import channel_names
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -216,7 +220,7 @@ class DirectEstimator(Estimator):
                 f"{list(space.names)} do not (use instruments=None)"
             )
             raise DataError(msg)
-        return self._fit_nonlinear(space, equations, diagnostics)
+        return self._fit_nonlinear(space, equations, data, diagnostics)
 
     # -- linear unknowns -------------------------------------------------------------------------------------------
     def _fit_linear(
@@ -254,8 +258,6 @@ class DirectEstimator(Estimator):
                     stacklevel=4,
                 )
         message = "linear least squares" if self.instruments is None else f"instrumental variables ({self.instruments})"
-        tested, tested_weights, diagnostics["residuals_tested"] = self._tested_errors(
-            space, eq, data, *every_sample, (theta, weights) if self.instruments == "model" else ls_fit)
         outside = [
             n for n, v, lo, hi in zip(space.names, theta, space.lower, space.upper, strict=True) if not lo <= v <= hi
         ]
@@ -279,6 +281,11 @@ class DirectEstimator(Estimator):
             diagnostics["warnings"] = [*diagnostics.get("warnings", []), line]
             message += f"; estimate at a bound for {at_bound}"
             warnings.warn(f"direct estimate outside the bounds for {outside}; {line}", DataWarning, stacklevel=4)
+        # the verdict is that of the estimate reported: with the unknowns a bound holds kept there
+        held = np.isin(np.array(space.names), at_bound)
+        start = (theta, weights) if self.instruments == "model" else (np.where(held, theta, ls_fit[0]), ls_fit[1])
+        tested, tested_weights, diagnostics["residuals_tested"] = self._tested_errors(
+            space, eq, data, *every_sample, start, held)
         errors = (b - a @ theta) * weights[:, None]  # (n_dof, n_s): weighted equation errors
         residuals = errors.ravel()
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac, residuals=residuals)
@@ -286,10 +293,7 @@ class DirectEstimator(Estimator):
         exact = bool(np.sqrt(np.mean(raw**2)) <= 1e-8 * np.sqrt(np.mean(b**2)))
         unc = self._covariance(unc, eq, jac, errors, diagnostics, exact=exact)
         if at_bound:  # an estimate held by its bound has no Gauss-Newton interval
-            held = np.isin(np.array(space.names), at_bound)
-            ci = unc.ci95.copy()
-            ci[held] = np.nan
-            unc = replace(unc, ci95=ci, identifiable=unc.identifiable & ~held)
+            unc = _held_without_interval(unc, at_bound)
             diagnostics["practically_non_identifiable"] = dict.fromkeys(at_bound, "at a bound")
         diagnostics["weights"] = dict(zip(eq.dofs, (float(w) for w in weights), strict=True))
         diagnostics["iterations"] = len(history)
@@ -302,40 +306,45 @@ class DirectEstimator(Estimator):
             self.method, unc, cost=float(residuals @ residuals), success=success, message=message,
             diagnostics=diagnostics,
         )
-        if tested is None:
-            line = f"the equations of motion were not tested against the forces: {diagnostics['residuals_tested']}"
-            return replace(estimate, diagnostics={**estimate.diagnostics,
-                                                  "warnings": [*estimate.diagnostics.get("warnings", []), line]})
-        tested_rms = np.sqrt(np.mean((tested / tested_weights[:, None]) ** 2))
-        if tested_rms <= 1e-8 * np.sqrt(np.mean(b**2)):
-            return estimate  # the tested solution fits exactly (noise-free data): round-off is not tested
-        return with_residual_tests(estimate, [tested.T], [eq.forces[:, eq.forces.shape[1] - tested.shape[1]:].T],
-                                   list(eq.dofs), [eq.model.input_names[c] for c in eq.columns])
+        return _with_verdict(estimate, eq, tested, tested_weights, float(np.sqrt(np.mean(b**2))))
 
-    def _model_instruments(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array, b: Array,
-                           theta: Array, weights: Array, history: list[dict[str, float]] | None = None
+    def _model_instruments(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array | None,
+                           b: Array | None, theta: Array, weights: Array, history: list[dict[str, float]] | None = None,
+                           held: NDArray[np.bool_] | None = None
                            ) -> tuple[Array, Array | None, Array, Exception | None]:
         """``n_iter`` model-instrument iterations from ``theta``: the instruments are the regressors of the model's
         response simulated at the last estimate, the DOFs re-weighted by their residuals before each solve.
+
+        Unknowns that enter linearly solve the regression ``a``, ``b`` of every sample. For unknowns that enter
+        non-linearly (``a``, ``b`` None) the instruments are the Jacobian of the equation errors on the simulated
+        response, ``Z``, and each iteration solves ``Z^T W e(theta) = 0`` by Gauss-Newton steps from ``theta``
+        (:meth:`_nonlinear_iv`). Unknowns flagged in ``held`` keep their values (an estimate held by its bound).
 
         Returns the estimate, the last solve's Jacobian (None if none ran), the weights, and the error that stopped
         the iterations where the model could not be simulated (None when all ran). Each estimate is appended to
         ``history`` when given.
         """
         jac = None
+        held = np.zeros(space.n, dtype=bool) if held is None else held
         for _ in range(int(self.n_iter)):
             try:
                 simulated = eq.simulate(theta, data.time)
             except (ModelError, np.linalg.LinAlgError, ValueError) as exc:
                 return theta, jac, weights, exc
-            weights = _residual_weights(a, b, theta, weights)
-            theta, jac = _iv_solve(a, b, eq.regression(simulated)[0], weights, space.start)
+            if a is None or b is None:
+                theta, jac, weights, stopped = _nonlinear_iv(space, eq, simulated, theta, weights, held)
+                if stopped is not None:
+                    return theta, jac, weights, stopped
+            else:
+                weights = _residual_weights(a, b, theta, weights)
+                theta, jac = _held_iv_solve(a, b, eq.regression(simulated)[0], weights, space.start, theta, held)
             if history is not None:
                 history.append(space.mapping(theta))
         return theta, jac, weights, None
 
-    def _tested_errors(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array, b: Array,
-                       fit: tuple[Array, Array]) -> tuple[Array | None, Array, str]:
+    def _tested_errors(self, space: ParameterSpace, eq: _Equations, data: TimeData, a: Array | None,
+                       b: Array | None, fit: tuple[Array, Array], held: NDArray[np.bool_]
+                       ) -> tuple[Array | None, Array, str]:
         """The weighted equation errors (n_dof, n_s) whose correlation with the forces tests the equations, their
         DOF weights, and what they are (``diagnostics["residuals_tested"]``).
 
@@ -348,26 +357,37 @@ class DirectEstimator(Estimator):
         estimate's error enters the equation errors through the regressors, which correlate with the forces at lag 0
         (13 of 20 ``lsim`` records at 5 % noise whose equations hold failed on them). So the errors tested are those
         of the model-instrument estimate: the one reported (``fit``) with ``instruments="model"``, else ``n_iter``
-        iterations from the least-squares ``fit``, as ``instruments="model"`` runs them. None where the model cannot
-        be simulated there.
+        iterations from the least-squares (linear unknowns) or Gauss-Newton (non-linear unknowns) ``fit``, as
+        ``instruments="model"`` runs them. Unknowns flagged in ``held`` (the reported estimate's, held by a bound)
+        keep their values: the verdict is that of the model within the bounds. ``a``, ``b``: the regression of every
+        sample (linear unknowns; None for non-linear ones). None where the model cannot be simulated there.
         """
         theta, weights = fit
-        if self.instruments == "model":
+        names = [n for n, h in zip(space.names, held, strict=True) if h]
+        kept = f"; {names} held at their bounds" if names else ""
+        if a is not None and b is not None and self.instruments == "model":
             return (np.asarray((b - a @ theta) * weights[:, None], dtype=float), weights,
-                    "the equation errors of the estimate (instrumental variables, model)")
+                    f"the equation errors of the estimate (instrumental variables, model{kept})")
         try:
-            theta, _, weights, stopped = self._model_instruments(space, eq, data, a, b, theta, weights)
+            theta, _, weights, stopped = self._model_instruments(space, eq, data, a, b, theta, weights, held=held)
         except (np.linalg.LinAlgError, ValueError) as exc:
             stopped = exc
         if stopped is not None:
-            return None, weights, f"none: the model cannot be simulated at {space.mapping(theta)} ({stopped})"
+            return None, weights, (f"none: the model-instrument iterations stopped at {space.mapping(theta)} "
+                                   f"({stopped})")
         if not np.all(np.isfinite(theta)):
             return None, weights, "none: the model-instrument solution is not finite"
-        what = "least-squares" if self.instruments is None else "delayed-instrument"
-        return (np.asarray((b - a @ theta) * weights[:, None], dtype=float), weights,
-                f"the equation errors of the model-instrument estimate ({self.n_iter} iterations from least squares; "
-                f"the {what} estimate's own errors correlate with the forces through "
-                f"{'the noise bias' if self.instruments is None else 'its larger error'})")
+        if a is None or b is None:
+            errors = -eq.residuals(theta)
+            what, source = "Gauss-Newton", "Gauss-Newton (least-squares) estimate"
+        else:
+            errors = b - a @ theta
+            what = "least-squares" if self.instruments is None else "delayed-instrument"
+            source = "least squares"
+        return (np.asarray(errors * weights[:, None], dtype=float), weights,
+                f"the equation errors of the model-instrument estimate ({self.n_iter} iterations from {source}"
+                f"{kept}; the {what} estimate's own errors correlate with the forces through "
+                f"{'its larger error' if self.instruments == 'delayed' else 'the noise bias'})")
 
     def _covariance(self, unc: LocalUncertainty, eq: _Equations, jac: Array, errors: Array,
                     diagnostics: dict[str, Any], *, exact: bool) -> LocalUncertainty:
@@ -401,11 +421,15 @@ class DirectEstimator(Estimator):
         return hac
 
     # -- non-linear unknowns ---------------------------------------------------------------------------------------
-    def _fit_nonlinear(self, space: ParameterSpace, eq: _Equations, diagnostics: dict[str, Any]) -> ParameterEstimate:
+    def _fit_nonlinear(self, space: ParameterSpace, eq: _Equations, data: TimeData,
+                       diagnostics: dict[str, Any]) -> ParameterEstimate:
         """Gauss-Newton (bounded trust-region) on the weighted equation errors, in the space's internal coordinates.
 
         The first pass weights each DOF by the RMS of its equation error at the start, the second by that at the
-        first estimate, continuing from it.
+        first estimate, continuing from it. The intervals are those of the search's coordinates
+        (:func:`honest_intervals`); an unknown held by its bound has none and is practically non-identifiable. The
+        verdict tests the equation errors of the model-instrument estimate from there (:meth:`_tested_errors`): the
+        Gauss-Newton estimate's own errors correlate with the forces through the noise bias.
         """
         lo, hi = space.internal_bounds()
         first = 1.0 / eq.scale_from_residual(eq.residuals(space.start))
@@ -430,6 +454,8 @@ class DirectEstimator(Estimator):
         unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=jac_p, residuals=sol.fun)
         at_bound = [n for n, a, b, x in zip(space.names, lo, hi, sol.x, strict=True) if np.isclose(x, a) or
                     np.isclose(x, b)]
+        unc, practical = honest_intervals(space, unc, at_bound)
+        unc = _held_without_interval(unc, at_bound)
         message = f"Gauss-Newton on the equation errors: {sol.message}"
         if at_bound:
             message += f"; estimate at a bound for {at_bound}"
@@ -440,10 +466,49 @@ class DirectEstimator(Estimator):
             "at_bound": at_bound,
             "start": space.mapping(space.start),
         }
-        return ParameterEstimate.from_uncertainty(
+        if practical:
+            diagnostics["practically_non_identifiable"] = practical
+        if at_bound:
+            said = ", ".join(f"{n} at {theta[j]:.6g} (bounds [{space.lower[j]:g}, {space.upper[j]:g}])"
+                             for j, n in enumerate(space.names) if n in at_bound)
+            diagnostics["warnings"] = [*diagnostics.get("warnings", []),
+                                       f"the Gauss-Newton search stopped at a bound: {said}; such an estimate has no "
+                                       f"interval and the verdict is that of the model with it there; widen the "
+                                       f"bounds if they exclude the truth"]
+        held = np.isin(np.array(space.names), at_bound)
+        tested, tested_weights, diagnostics["residuals_tested"] = self._tested_errors(
+            space, eq, data, None, None, (theta, weights), held)
+        estimate = ParameterEstimate.from_uncertainty(
             self.method, unc, cost=float(sol.fun @ sol.fun), success=bool(sol.success) and sol.status > 0,
             message=message, diagnostics=diagnostics,
         )
+        return _with_verdict(estimate, eq, tested, tested_weights, eq.term_scale(theta))
+
+
+def _with_verdict(estimate: ParameterEstimate, eq: _Equations, tested: Array | None, weights: Array,
+                  scale: float) -> ParameterEstimate:
+    """``estimate`` with the force-independence test of the equation errors ``tested`` (n_dof, n_s; DOF
+    ``weights``) as its verdict (:func:`with_residual_tests`); a warning line where none could be tested. Errors
+    whose RMS is below 1e-8 of ``scale`` (N: the size of the equations' terms) are an exact fit, not tested."""
+    if tested is None:
+        line = f"the equations of motion were not tested against the forces: {estimate.diagnostics['residuals_tested']}"
+        return replace(estimate, diagnostics={**estimate.diagnostics,
+                                              "warnings": [*estimate.diagnostics.get("warnings", []), line]})
+    tested_rms = np.sqrt(np.mean((tested / weights[:, None]) ** 2))
+    if tested_rms <= 1e-8 * scale:
+        return estimate  # the tested solution fits exactly (noise-free data): round-off is not tested
+    return with_residual_tests(estimate, [tested.T], [eq.forces[:, eq.forces.shape[1] - tested.shape[1]:].T],
+                               list(eq.dofs), [eq.model.input_names[c] for c in eq.columns])
+
+
+def _held_without_interval(unc: LocalUncertainty, at_bound: Sequence[str]) -> LocalUncertainty:
+    """``unc`` without intervals for the unknowns held by a bound, which are not identifiable."""
+    held = np.isin(np.array(unc.names), list(at_bound))
+    if not held.any():
+        return unc
+    ci = unc.ci95.copy()
+    ci[held] = np.nan
+    return replace(unc, ci95=ci, identifiable=unc.identifiable & ~held)
 
 
 # ---------------------------------------------------------------------------------------------------------------
@@ -678,14 +743,17 @@ class _Equations:
         return np.asarray(np.maximum(scale, 1e-12 * top), dtype=float)
 
     # general (non-linear) residuals -------------------------------------------------------------------------------
-    def residuals(self, p: Array) -> Array:
+    def residuals(self, p: Array, motion: Array | None = None) -> Array:
+        """Equation errors ``M q'' + D q' + K q - B u`` (n_dof, n_samples) at ``p`` of the measured motion (or of
+        ``motion``)."""
         m, d, k, b_mat = self._matrices(np.asarray(p, dtype=float))
-        q, qd, qdd = self.motion
+        q, qd, qdd = self.motion if motion is None else motion
         return np.asarray(m @ qdd + d @ qd + k @ q - b_mat @ self.forces, dtype=float)
 
-    def jacobian(self, p: Array) -> Array:
+    def jacobian(self, p: Array, motion: Array | None = None) -> Array:
+        """Derivatives (n_dof, n_samples, n_unknowns) of :meth:`residuals` at ``p``."""
         dm, dd, dk, d_b = self._derivatives(np.asarray(p, dtype=float))
-        q, qd, qdd = self.motion
+        q, qd, qdd = self.motion if motion is None else motion
         return np.asarray(
             np.einsum("jab,bs->asj", dm, qdd)
             + np.einsum("jab,bs->asj", dd, qd)
@@ -693,6 +761,12 @@ class _Equations:
             - np.einsum("jab,bs->asj", d_b, self.forces),
             dtype=float,
         )
+
+    def term_scale(self, p: Array) -> float:
+        """The largest RMS (N) of the equations' terms ``M q''``, ``D q'``, ``K q`` and ``B u`` at ``p``."""
+        m, d, k, b_mat = self._matrices(np.asarray(p, dtype=float))
+        q, qd, qdd = self.motion
+        return max(float(np.sqrt(np.mean(t**2))) for t in (m @ qdd, d @ qd, k @ q, b_mat @ self.forces))
 
     def scale_from_residual(self, r: Array, floor: Array | None = None) -> Array:
         scale = np.sqrt(np.mean(r**2, axis=1))
@@ -762,3 +836,56 @@ def _iv_solve(a: Array, b: Array, inst: Array, weights: Array, p0: Array) -> tup
     cols[cols == 0] = 1.0
     theta = p0 + np.linalg.lstsq(projected / cols, q @ (q.T @ bw), rcond=None)[0] / cols
     return np.asarray(theta, dtype=float), np.asarray(projected, dtype=float)
+
+
+def _held_iv_solve(a: Array, b: Array, inst: Array, weights: Array, p0: Array, theta: Array,
+                   held: NDArray[np.bool_]) -> tuple[Array, Array]:
+    """:func:`_iv_solve` with the unknowns flagged in ``held`` kept at their values in ``theta`` (the Jacobian's
+    columns of the held unknowns are zero)."""
+    if not held.any():
+        return _iv_solve(a, b, inst, weights, p0)
+    free = ~held
+    sub, sub_jac = _iv_solve(a[..., free], b - a[..., held] @ theta[held], inst[..., free], weights, p0[free])
+    out = theta.copy()
+    out[free] = sub
+    jac = np.zeros((sub_jac.shape[0], theta.size))
+    jac[:, free] = sub_jac
+    return out, jac
+
+
+#: Gauss-Newton steps of one non-linear instrumental-variable solve, and the internal-coordinate step that ends it.
+_IV_STEPS = 20
+_IV_STEP_TOL = 1e-10
+
+
+def _nonlinear_iv(space: ParameterSpace, eq: _Equations, simulated: Array, theta: Array, weights: Array,
+                  held: NDArray[np.bool_]) -> tuple[Array, Array | None, Array, Exception | None]:
+    """One model-instrument iteration for unknowns that enter the equations non-linearly.
+
+    The instruments are the Jacobian ``Z`` of the equation errors evaluated on the model's noise-free response
+    ``simulated`` at ``theta`` (what the regressors are for linear unknowns); the DOFs are weighted by the
+    residuals at ``theta``; ``Z^T W e(p) = 0`` is solved by Gauss-Newton steps on the equation errors linearized
+    at each step, in the space's internal coordinates (log-searched unknowns stay positive), from ``theta``.
+    Unknowns flagged in ``held`` keep their values. Returns the estimate, the projected Jacobian ``P A`` of the
+    last step (SI), the weights and the error that stopped the steps (a non-finite estimate; else None).
+    """
+    u = space.to_internal(theta)
+    dp_du = space.value_jacobian(u)
+    inst = eq.jacobian(theta, simulated) * dp_du
+    a = eq.jacobian(theta) * dp_du
+    b = a @ u - eq.residuals(theta)
+    weights = _residual_weights(a, b, u, weights)
+    jac = None
+    for _ in range(_IV_STEPS):
+        new, jac = _held_iv_solve(a, b, inst, weights, u, u, held)
+        step = float(np.max(np.abs(new - u)))
+        u = new
+        theta = space.from_internal(u)
+        if not np.all(np.isfinite(theta)):
+            return theta, None, weights, FloatingPointError("the instrumental-variable step is not finite")
+        dp_du = space.value_jacobian(u)
+        a = eq.jacobian(theta) * dp_du
+        b = a @ u - eq.residuals(theta)
+        if step <= _IV_STEP_TOL:
+            break
+    return theta, None if jac is None else jac / dp_du, weights, None
