@@ -466,7 +466,8 @@ def test_direct_nonlinear_model_instruments_equal_the_linear_ones_and_least_squa
                for w in linear_plain.diagnostics["warnings"])
     iv = _fit_preloaded(data, instruments="model")
     linear = _fit(two_mass, "direct", data, instruments="model", inputs=["F1"])
-    assert iv.success and linear.success
+    assert iv.success
+    assert linear.success
     assert "noise_bias" not in iv.diagnostics
     assert iv.diagnostics["residuals_tested"] == "the equation errors of the estimate (instrumental variables, model)"
     # both run 3 iterations, from different starts (Gauss-Newton, least squares): equal within 1e-3 of a standard
