@@ -390,6 +390,8 @@ class DirectEstimator(Estimator):
                                    f"({stopped})"), None
         if not np.all(np.isfinite(theta)) or iv_jac is None:
             return None, weights, "none: the model-instrument solution is not finite", None
+        names = [n for n, h in zip(space.names, held, strict=True) if h]  # with those the iterations held
+        kept = f"; {names} held at their bounds" if names else ""
         if a is None or b is None:
             errors = -eq.residuals(theta)
             what, source = "Gauss-Newton", "Gauss-Newton (least-squares) estimate"
@@ -470,8 +472,9 @@ class DirectEstimator(Estimator):
         message = f"Gauss-Newton on the equation errors: {sol.message}"
         diagnostics = {**diagnostics, "iterations": int(sol.nfev), "start": space.mapping(space.start)}
         if self.instruments == "model":
-            theta, weights, held, iv_jac = self._nonlinear_model_instruments(space, eq, data, theta, weights, held,
-                                                                             diagnostics)
+            # from the Gauss-Newton estimate, all unknowns free: its bias may have put one at a bound
+            theta, weights, held, iv_jac = self._nonlinear_model_instruments(
+                space, eq, data, theta, weights, np.zeros(space.n, dtype=bool), diagnostics)
             errors = -eq.residuals(theta) * weights[:, None]
             unc = jacobian_uncertainty(names=space.names, values=theta, jacobian=iv_jac, residuals=errors.ravel())
             message = f"instrumental variables (model) from the {message}"
@@ -502,7 +505,7 @@ class DirectEstimator(Estimator):
                 f"; {at_bound} held at their bounds)" if at_bound else ")")
         else:
             tested, tested_weights, diagnostics["residuals_tested"], iv = self._tested_errors(
-                space, eq, data, None, None, (theta, weights), held)
+                space, eq, data, None, None, (theta, weights), held.copy())
             if iv is not None and tested is not None:
                 _noise_bias(space.names, theta, *iv, tested, held, diagnostics, "Gauss-Newton")
         estimate = ParameterEstimate.from_uncertainty(
@@ -515,29 +518,19 @@ class DirectEstimator(Estimator):
                                      weights: Array, held: NDArray[np.bool_], diagnostics: dict[str, Any]
                                      ) -> tuple[Array, Array, NDArray[np.bool_], Array]:
         """The model-instrument estimate of non-linear unknowns from the Gauss-Newton ``theta``: its values, DOF
-        weights, the unknowns held at a bound (those ``held`` and those the iterations put outside their bounds,
-        which are iterated again with them held there) and its Jacobian ``P A`` (SI)."""
-        gauss_newton = (theta, weights)
+        weights, the unknowns held at a bound (those in ``held`` and those the iterations put outside their bounds)
+        and its Jacobian ``P A`` (SI)."""
+        held = held.copy()
         history = [space.mapping(theta)]
-        jac: Array | None = None
-        for _ in range(space.n + 1):  # again where a pass leaves the bounds, with those unknowns held there
-            new, jac, weights, stopped = self._model_instruments(space, eq, data, None, None, gauss_newton[0],
-                                                                 gauss_newton[1], history, held)
-            if stopped is not None or jac is None:
-                warnings.warn(f"model instruments stopped at {space.mapping(new)} ({stopped}); the Gauss-Newton "
-                              f"estimate is kept", ConvergenceWarning, stacklevel=5)
-                theta, weights = gauss_newton
-                jac = _flat_jac(eq.jacobian, weights)(theta)
-                break
-            theta = new
-            outside = ~held & ((theta < space.lower) | (theta > space.upper))
-            if not outside.any():
-                break
-            held = held | outside
-            gauss_newton = (np.clip(np.where(outside, theta, gauss_newton[0]), space.lower, space.upper),
-                            gauss_newton[1])
+        new, jac, new_weights, stopped = self._model_instruments(space, eq, data, None, None, theta, weights, history,
+                                                                 held)
         diagnostics["history"] = history
-        return theta, weights, held, _flat_jac(eq.jacobian, weights)(theta) if jac is None else jac
+        if stopped is not None or jac is None:
+            warnings.warn(f"model instruments stopped at {space.mapping(new)} ({stopped}); the Gauss-Newton estimate "
+                          f"is kept", ConvergenceWarning, stacklevel=5)
+            return theta, weights, held, _flat_jac(eq.jacobian, weights)(theta)
+        return new, new_weights, held, jac
+
 
 #: Level of the noise-bias check of least-squares estimates (Bonferroni over the unknowns, as the residual tests').
 _BIAS_LEVEL = 0.01
@@ -556,6 +549,8 @@ def _noise_bias(names: Sequence[str], values: Array, iv_values: Array, iv_jac: A
     """
     from scipy import stats
 
+    if not (np.all(np.isfinite(iv_jac)) and np.all(np.isfinite(iv_errors))):
+        return
     unc = jacobian_uncertainty(names=names, values=iv_values, jacobian=iv_jac, residuals=iv_errors.ravel())
     with np.errstate(divide="ignore", invalid="ignore"):
         z = (values - iv_values) / unc.std
@@ -949,7 +944,7 @@ def _held_iv_solve(a: Array, b: Array, inst: Array, weights: Array, p0: Array, t
     return out, jac
 
 
-#: Gauss-Newton steps of one non-linear instrumental-variable solve, and the internal-coordinate step that ends it.
+#: Gauss-Newton steps of one non-linear instrumental-variable solve, and the relative step that ends it.
 _IV_STEPS = 20
 _IV_STEP_TOL = 1e-10
 
@@ -961,27 +956,30 @@ def _nonlinear_iv(space: ParameterSpace, eq: _Equations, simulated: Array, theta
     The instruments are the Jacobian ``Z`` of the equation errors evaluated on the model's noise-free response
     ``simulated`` at ``theta`` (what the regressors are for linear unknowns); the DOFs are weighted by the
     residuals at ``theta``; ``Z^T W e(p) = 0`` is solved by Gauss-Newton steps on the equation errors linearized
-    at each step, in the space's internal coordinates (log-searched unknowns stay positive), from ``theta``.
-    Unknowns flagged in ``held`` keep their values. Returns the estimate, the projected Jacobian ``P A`` of the
-    last step (SI), the weights and the error that stopped the steps (a non-finite estimate; else None).
+    at each step, in SI units (affine unknowns then take one step, as the linear path; a logarithm would overshoot
+    from a Gauss-Newton estimate far off), from ``theta``. Unknowns flagged in ``held`` keep their values; a step
+    that puts an unknown outside its bounds holds it at the bound, flagged in ``held`` (in place). Returns the
+    estimate, the projected Jacobian ``P A`` of the last step, the weights and the error that stopped the steps (a
+    non-finite estimate; else None).
     """
-    u = space.to_internal(theta)
-    dp_du = space.value_jacobian(u)
-    inst = eq.jacobian(theta, simulated) * dp_du
-    a = eq.jacobian(theta) * dp_du
-    b = a @ u - eq.residuals(theta)
-    weights = _residual_weights(a, b, u, weights)
+    inst = eq.jacobian(theta, simulated)
+    a = eq.jacobian(theta)
+    b = a @ theta - eq.residuals(theta)
+    weights = _residual_weights(a, b, theta, weights)
     jac = None
+    scale = np.where(theta != 0, np.abs(theta), 1.0)
     for _ in range(_IV_STEPS):
-        new, jac = _held_iv_solve(a, b, inst, weights, u, u, held)
-        step = float(np.max(np.abs(new - u)))
-        u = new
-        theta = space.from_internal(u)
+        new, jac = _held_iv_solve(a, b, inst, weights, theta, theta, held)
+        outside = ~held & ((new < space.lower) | (new > space.upper))
+        if outside.any():  # held at the bound from here on (and for the caller)
+            held |= outside
+            new = np.clip(new, space.lower, space.upper)
+        step = float(np.max(np.abs(new - theta) / scale))
+        theta = new
         if not np.all(np.isfinite(theta)):
             return theta, None, weights, FloatingPointError("the instrumental-variable step is not finite")
-        dp_du = space.value_jacobian(u)
-        a = eq.jacobian(theta) * dp_du
-        b = a @ u - eq.residuals(theta)
+        a = eq.jacobian(theta)
+        b = a @ theta - eq.residuals(theta)
         if step <= _IV_STEP_TOL:
             break
-    return theta, None if jac is None else jac / dp_du, weights, None
+    return theta, jac, weights, None
