@@ -8,6 +8,9 @@ sine response where mass and stiffness are collinear.
 
 from __future__ import annotations
 
+import re
+import warnings
+
 import numpy as np
 import pytest
 
@@ -225,8 +228,31 @@ def test_nonlinear_preload_by_gauss_newton():
     # exact data, exact Jacobian: converged to the truth (start preload = 1, 41 % off in preload^(1/3))
     np.testing.assert_allclose(est.estimate_.values, [1.7, 1.25, 0.15e6], rtol=1e-8)
     assert est.estimate_.success
-    with pytest.raises(DataError, match=r"instruments='model' need unknowns that enter the equations linearly; \['preload', 'm1', 'k12'\] do not"):
-        DirectEstimator(nm, ["preload", "m1", "k12"], instruments="model").fit(data)
+    with pytest.raises(DataError, match=r"instruments='delayed' need unknowns that enter the equations linearly; \['preload', 'm1', 'k12'\] do not \(use instruments='model' or None\)"):
+        DirectEstimator(nm, ["preload", "m1", "k12"], instruments="delayed").fit(data)
+
+
+def test_nonlinear_estimate_held_by_a_bound_is_not_identifiable_and_its_verdict_is_the_models_there():
+    # the truth's preload (5) lies above its bound (3): Gauss-Newton stops at the bound. It used to report preload
+    # 3.0 with the interval [2.93, 3.07], "identifiable" and success
+    nm = NumericModel(structure_from_yaml(NONLINEAR_RIG))
+    truth = {"preload": 5.0, "m1": 1.25, "k12": 0.15e6}
+    data = time_response(nm.system(truth), random_noise(fs=2000.0, duration=0.5, rms=10.0, rng=5, name="F1"),
+                         noise=0.01, rng=3)
+    with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+        res = DirectEstimator(nm, ["preload", "m1", "k12"]).fit(data).estimate_
+    assert res.parameters["preload"] == pytest.approx(3.0, rel=1e-9)
+    assert res.diagnostics["at_bound"] == ["preload"]
+    assert res.diagnostics["practically_non_identifiable"] == {"preload": "at a bound"}
+    assert not res.identifiable[0]
+    assert np.all(np.isnan(res.ci95[0]))
+    assert any(w.startswith("the Gauss-Newton search stopped at a bound: preload at 3 (bounds [0.05, 3])")
+               for w in res.diagnostics["warnings"])
+    # the verdict is the model's with preload at its bound (m1 absorbs what it can: 1.075 for 1.25), which does not
+    # explain the data
+    assert "['preload'] held at their bounds" in res.diagnostics["residuals_tested"]
+    assert res.diagnostics["fit_test"] == "failed"
+    assert not res.success
 
 
 def test_estimate_outside_bounds_is_held_by_them_and_says_so(rig):
@@ -235,9 +261,12 @@ def test_estimate_outside_bounds_is_held_by_them_and_says_so(rig):
     truth = dict(TRUTH, k11=5.0e6)
     data = time_response(rig.system(truth), _excitation(2000.0, 0.3, None, 7))
     upper = rig.structure.parameter("k11").bounds[1]
-    with pytest.warns(DataWarning, match=r"direct estimate outside the bounds for \['k11'\]; the data alone put k11 "
-                                         r"at 5e\+06"):
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
         est = DirectEstimator(rig).fit(data)
+    said = [str(w.message) for w in caught]
+    assert any(w.category is DataWarning and re.match(r"direct estimate outside the bounds for \['k11'\]; the data "
+                                                       r"alone put k11 at 5e\+06", str(w.message)) for w in caught), said
     res = est.estimate_
     assert est.params_["k11"] == upper
     assert res.diagnostics["unbounded"]["k11"] == pytest.approx(5.0e6, rel=1e-9)  # noise-free data: the truth
@@ -251,11 +280,17 @@ def test_estimate_outside_bounds_is_held_by_them_and_says_so(rig):
     # 2e-3: each path weights the DOFs by its own residuals, which moves k12 by 8e-4; clipping k11 alone would
     # leave m2 2.7 % away)
     others = [n for n in est.estimate_.names if n != "k11"]
-    # k11 known at its bound is a wrong model of these data: the equations do not hold, and that fit FAILS (the
-    # bounded estimate itself is not failed: its unbounded solution fits, the bound's warning says the rest)
+    # k11 known at its bound is a wrong model of these data: the equations do not hold, and that fit FAILS. So does
+    # the bounded estimate, which is that model: its verdict is the estimate's reported, k11 held at its bound (it
+    # was taken at the unbounded solution, which fits exactly: success, only the bound's warning spoke)
     with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
         fixed = DirectEstimator(rig, others, values={"k11": upper}).fit(data).params_
-    assert res.success
+    assert not res.success
+    assert res.diagnostics["fit_test"] == "failed"
+    assert any(re.match(r"direct estimation failed its residual tests: the residuals correlate with the inputs", s)
+               for s in said), said
+    assert "['k11'] held at their bounds" in res.diagnostics["residuals_tested"]
+    assert any("correlate with input" in w for w in res.diagnostics["warnings"])
     for name in others:
         np.testing.assert_allclose(est.params_[name], fixed[name], rtol=2e-3)
 

@@ -9,8 +9,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from cappe.estimate._study import simulate_data, simulation_study
-from cappe.exceptions import ModelError
+from cappe.estimate._study import StudyResult, simulate_data, simulation_study
+from cappe.exceptions import ConvergenceWarning, ModelError
 from cappe.model import NumericModel
 from cappe.model.loader import load_model
 
@@ -78,3 +78,48 @@ def test_modal_methods_refuse_a_position(carriage):
     with pytest.raises(ModelError, match=r"a position does not apply to method 'modal': its reference data carry"):
         simulation_study(model=carriage, method="modal", truth={}, unknowns=["k"], noise_levels=[0.0], seeds=[0],
                          position={"y": 0.2})
+
+
+def test_coverage_counts_the_runs_claiming_success_and_all_runs():
+    # three runs at 1 % noise, the second FAILED: hand-made intervals, counts written out by hand
+    truth = np.array([2.0, 5.0])
+    ci95 = np.array([[[[1.9, 2.1], [4.0, 4.5]],           # success: covers a, not b
+                      [[1.5, 2.5], [4.8, 5.2]],           # FAILED: covers both
+                      [[np.nan, np.nan], [4.9, 5.1]]]])   # success: a without an interval (not covered), covers b
+    result = StudyResult("direct", ("a", "b"), truth, np.array([0.01]), (0, 1, 2),
+                         np.array([[[2.0, 4.2], [np.nan, np.nan], [2.2, 5.0]]]), np.array([[True, False, True]]),
+                         ci95=ci95)
+    rows = {r["parameter"]: r for r in result.summary()}
+    assert (rows["a"]["covered"], rows["a"]["runs"], rows["a"]["covered_all"], rows["a"]["runs_all"]) == (1, 2, 2, 3)
+    assert (rows["b"]["covered"], rows["b"]["runs"], rows["b"]["covered_all"], rows["b"]["runs_all"]) == (1, 2, 2, 3)
+    text = result.to_text()
+    assert "1 of 3 runs were not a success (did not converge or failed a residual test; 1 of 3 at 1 %)" in text
+    assert "95 % intervals covering the truth: of the runs claiming success | of all runs" in text
+    assert [line.split()[-3:] for line in text.splitlines()[-2:]] == [["1/2", "|", "2/3"], ["1/2", "|", "2/3"]]
+    assert result.to_dict()["rows"][0]["covered_all"] == 2
+
+
+def test_failed_runs_keep_their_intervals_in_the_coverage_of_all_runs():
+    # the data are simulated with c11 = 20 while the estimator knows the rig file's 13.42: a wrong known parameter,
+    # so the noise-free runs are FAILED (their equation errors follow the forces). Their estimates are left out of
+    # the mean, but their intervals count in the coverage of all runs (before: no coverage at all)
+    from cappe.estimate._direct import DirectEstimator
+
+    rig = NumericModel(load_model("builtin:two-mass-rig"))
+    unknowns = ["m1", "m2", "k11", "k12", "k22"]
+    result = simulation_study(model=rig, method="direct", truth={"c11": 20.0}, unknowns=unknowns, noise_levels=[0.0],
+                              seeds=[0, 1], duration=0.5)
+    assert not result.success.any()
+    assert np.isnan(result.estimates).all()
+    rows = result.summary()
+    assert {(r["runs"], r["covered"], r["runs_all"]) for r in rows} == {(0, 0, 2)}
+    # independent bookkeeping: the same runs again, outside the study
+    covered = np.zeros(len(unknowns), dtype=int)
+    for seed in (0, 1):
+        data = simulate_data(rig, "time", rig.structure.resolve_parameters({"c11": 20.0}), noise=0.0,
+                             rng=np.random.default_rng([seed, 0]), fs=1000.0, duration=0.5)
+        with pytest.warns(ConvergenceWarning, match="direct estimation failed its residual tests"):
+            again = DirectEstimator(rig, unknowns, rng=seed).fit(data).estimate_
+        np.testing.assert_array_equal(result.ci95[0, seed], again.ci95)
+        covered += (again.ci95[:, 0] <= result.truth) & (result.truth <= again.ci95[:, 1])
+    assert [r["covered_all"] for r in rows] == covered.tolist()

@@ -41,10 +41,13 @@ class StudyResult:
     estimates : ndarray, shape (n_levels, n_seeds, n)
         Estimates (SI; nan where a run failed).
     success : ndarray of bool, shape (n_levels, n_seeds)
-        Which runs converged.
+        Which runs were a success (converged and passed the method's residual tests).
     position : dict
         Axis position (m or rad) the time data and FRFs were simulated and estimated at (empty: the model's
         default position; modal data carry theirs).
+    ci95 : ndarray, shape (n_levels, n_seeds, n, 2), optional
+        The 95 % interval of every run, successful or not (nan where the run gave none: a parameter it could not
+        determine or held at a bound). None for a result made without them.
     """
 
     method: str
@@ -55,18 +58,35 @@ class StudyResult:
     estimates: Array
     success: NDArray[np.bool_]
     position: dict[str, float] = field(default_factory=dict)
+    ci95: Array | None = None
+
+    def covered(self) -> NDArray[np.bool_] | None:
+        """Whether each run's 95 % interval covers the truth, shape (n_levels, n_seeds, n); a run without an
+        interval for a parameter does not cover it. None without intervals."""
+        if self.ci95 is None:
+            return None
+        lo, hi = self.ci95[..., 0], self.ci95[..., 1]
+        with np.errstate(invalid="ignore"):
+            return np.asarray(np.isfinite(lo) & np.isfinite(hi) & (lo <= self.truth) & (self.truth <= hi))
 
     def summary(self) -> list[dict[str, Any]]:
-        """One row per noise level and parameter: truth, mean, std, mean error in %, runs used."""
+        """One row per noise level and parameter: truth, mean, std, mean error in %, runs used (the successful
+        ones), and, with intervals, how many of those and of all runs (``runs_all``) cover the truth
+        (``covered``, ``covered_all``)."""
         rows = []
+        covered = self.covered()
         for i, level in enumerate(self.noise_levels):
             ok = self.success[i]
             for k, name in enumerate(self.names):
                 values = self.estimates[i, ok, k]
                 mean = float(values.mean()) if values.size else float("nan")
                 std = float(values.std(ddof=1)) if values.size > 1 else float("nan")
-                rows.append({"noise": float(level), "parameter": name, "truth": float(self.truth[k]), "mean": mean,
-                             "std": std, "error_percent": 100 * (mean / self.truth[k] - 1), "runs": int(ok.sum())})
+                row = {"noise": float(level), "parameter": name, "truth": float(self.truth[k]), "mean": mean,
+                       "std": std, "error_percent": 100 * (mean / self.truth[k] - 1), "runs": int(ok.sum())}
+                if covered is not None:
+                    row |= {"covered": int(covered[i, ok, k].sum()), "covered_all": int(covered[i, :, k].sum()),
+                            "runs_all": int(ok.size)}
+                rows.append(row)
         return rows
 
     def to_dict(self) -> dict[str, Any]:
@@ -98,8 +118,23 @@ class StudyResult:
             lines.append(f"{name:>10s} {self.truth[k]:11.5g}" + "".join(cells))
         failed = int((~self.success).sum())
         if failed:
+            per_level = ", ".join(f"{int((~ok).sum())} of {ok.size} at {100 * n:g} %"
+                                  for n, ok in zip(self.noise_levels, self.success, strict=True))
             lines.append(f"{failed} of {self.success.size} runs were not a success (did not converge or failed a "
-                         "residual test) and are left out")
+                         f"residual test; {per_level}) and are left out of the mean and std")
+        if self.ci95 is None:
+            return "\n".join(lines)
+        lines.append("95 % intervals covering the truth: of the runs claiming success | of all runs (a run without "
+                     "an interval does not cover" + ("; noise-free runs have round-off intervals, not counted)"
+                                                    if np.any(self.noise_levels == 0) else ")"))
+        for k, name in enumerate(self.names):
+            cells = []
+            for i in range(self.noise_levels.size):
+                row = rows[i * len(self.names) + k]
+                cell = ("-" if self.noise_levels[i] == 0 else
+                        f"{row['covered']}/{row['runs']} | {row['covered_all']}/{row['runs_all']}")
+                cells.append(cell.rjust(30))
+            lines.append(f"{name:>10s} {'':11s}" + "".join(cells))
         return "\n".join(lines)
 
 
@@ -256,6 +291,7 @@ def simulation_study(
     truth_full = nm.structure.resolve_parameters(truth)
     levels = np.asarray(noise_levels, dtype=float)
     estimates = np.full((levels.size, len(seeds), len(names)), np.nan)
+    intervals = np.full((levels.size, len(seeds), len(names), 2), np.nan)
     success = np.zeros((levels.size, len(seeds)), dtype=bool)
     for i, level in enumerate(levels):
         for j, seed in enumerate(seeds):
@@ -266,8 +302,10 @@ def simulation_study(
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore", ConvergenceWarning)
                 result = estimator.fit(data).estimate_
+            intervals[i, j] = result.ci95
             if result.success:
                 estimates[i, j] = result.values
                 success[i, j] = True
     return StudyResult(method, tuple(names), np.array([truth_full[n] for n in names]), levels,
-                       tuple(int(s) for s in seeds), estimates, success, dict(options.get("position") or {}))
+                       tuple(int(s) for s in seeds), estimates, success, dict(options.get("position") or {}),
+                       intervals)
