@@ -390,9 +390,9 @@ def _independent_response(intersample, n, rng):
 def test_stated_standard_errors_match_the_scatter_over_noise_draws(two_mass, intersample):
     """Issue 21: on ten DAQ records one-step's errors were 0.43-0.48 of its stated standard errors (m2, k12, k22,
     c22). Here the stated std of every parameter is compared with the Monte-Carlo scatter of the estimates over 40
-    noise draws (1 %) on one record of scipy's making, F1 only, the seven unknowns: both the Gauss-Newton
-    covariance and the Newey-West sandwich ``covariance="auto"`` picks where a whiteness test fails must match
-    it. A std twice too wide (or half too narrow) fails."""
+    noise draws (1 %) on one record of scipy's making, F1 only, the seven unknowns, with the covariance
+    ``covariance="auto"`` picks (Gauss-Newton; the Newey-West sandwich on the one draw in 40 whose whiteness test
+    fails). A std twice or half the right one fails (checked by scaling the stated std)."""
     f, y = _independent_response(intersample, 2000, np.random.default_rng(40))
     gen = np.random.default_rng(41)
     z, covered = [], 0
