@@ -24,12 +24,16 @@ one-step,ekf --simulators daq --noises 0.01,0.05 --inputs 1 --seeds 10 --out cov
 5 % noise; the delayed record at 16x) with step 1 fitted to the band-limited input, and on ``lsim`` records (1 %)
 with the second step weighted by step 1's covariance (the default) and unweighted (``weighting="none"``, the method
 before issue 21). ``CAPPE_BENCH_TWO_STEP=f1f2``: the same three methods with F1 + F2 on the three simulators, 1 %
-and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP=errors``: one-step and two-step-tf side by side on
-the ten 64x records, every error with its standard error (``coverage_two_step_error_scale.json``).
+and 5 % (``coverage_two_step_f1f2.json``). ``CAPPE_BENCH_TWO_STEP=errors``: one-step, two-step-tf and two-step-zp side
+by side on the 64x records (F1, 1 %), every error with its standard error (``coverage_two_step_error_scale.json``).
+``CAPPE_BENCH_SEEDS=40`` sets the number of seeds of the two-step modes (default 10).
 ``CAPPE_BENCH_TWO_STEP_CASES=3,4,5`` runs those cases only (indices into
 the mode's list, results in ``..._part3.json``: parallel processes). Per row also the coverage of the fits that
 claim success, the median and worst error per parameter, how many fits passed the second step's chi-square test,
 and CPU seconds.
+``--error-scale daq --oversample 64 --seeds 40``: one-step alone on 40 such records (``lsim``, ``daq``,
+``daq-delay``), each error with its stated standard error and with ``sigma^2 (J^T J)^-1`` from the true noise level
+(``coverage_onestep_error_scale_daq64.json``): are its intervals as wide as the scatter of its estimates?
 ``--false-alarm 100`` measures how often direct's force-independence test warns on records whose force and noise
 are independent (100 records per setting, four settings; a few minutes). ``--short-level 100``: the level of the
 input-correlation residual test on 300-sample records fitted with the right hold (and, as a check of its power,
@@ -187,28 +191,45 @@ def run_two_step(seeds: range, inputs: int = 1,
     return rows
 
 
-def run_error_scale(seeds: range, over: int = 64) -> list[dict[str, Any]]:
-    """Per seed, one-step and two-step-tf on the same DAQ record (F1, 1 %, ``over``): every parameter's relative
-    error and relative standard error, and the second step's chi-square test (``CAPPE_BENCH_TWO_STEP=errors``):
-    is the two-step's larger error a bias, or the scale its own standard errors state?"""
+def run_error_scale(seeds: range, over: int = 64, kind: str = "daq",
+                    methods: tuple[str, ...] = ("one-step", "two-step-tf", "two-step-zp"),
+                    name: str = "coverage_two_step_error_scale") -> list[dict[str, Any]]:
+    """Per seed, the methods on the same record (F1, 1 %, simulator ``kind``, DAQ oversampling ``over``): every
+    parameter's relative error and relative standard error, whether the fit claims success, the second step's
+    chi-square test (``CAPPE_BENCH_TWO_STEP=errors``: is the two-step's larger error a bias, or the scale its own
+    standard errors state?) and, for one-step, the Gauss-Newton standard errors ``sigma^2 (J^T J)^-1`` from the
+    noise level the record was made with instead of the fitted ``s^2`` (``--error-scale``: are one-step's
+    standard errors the scatter of its estimates, and if not, is it ``s^2``, the sandwich, or ``J``?)."""
     nm = NumericModel(load_model("builtin:two-mass-rig"))
+    noise = 0.01
     rows: list[dict[str, Any]] = []
     for seed in seeds:
-        data = record("daq", 0.01, seed, 1, over).select(["F1", "d1", "d2"])
-        row: dict[str, Any] = {"seed": seed, "oversample": over}
-        for method in ("one-step", "two-step-tf"):
+        data = record(kind, noise, seed, 1, over).select(["F1", "d1", "d2"])
+        row: dict[str, Any] = {"seed": seed, "simulator": kind, "oversample": over}
+        for method in methods:
+            c0 = time.process_time()
             with warnings.catch_warnings():
                 warnings.simplefilter("ignore")
-                est = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
-                                              **settings(method, "daq", 1)).fit(data).estimate_
+                fitted = estimator_class(method)(nm, UNKNOWNS, values={"c12": 0.0}, rng=seed,
+                                                 **settings(method, kind, 1)).fit(data)
+            est = fitted.estimate_
             row[method] = {n: [est.values[k] / TRUTH[n] - 1, est.std[k] / TRUTH[n]] for k, n in enumerate(est.names)}
+            row[f"{method} success"] = bool(est.success)
+            row[f"{method} cpu_seconds"] = time.process_time() - c0
+            if method == "one-step" and fitted.cost_function_ is not None:
+                jac = fitted.cost_function_.jacobian  # output errors are divided by each channel's RMS
+                std = np.sqrt(noise**2 * np.diag(np.linalg.inv(jac.T @ jac)))[: len(est.names)]
+                row["one-step gauss_newton_true_noise"] = {n: float(std[k] / TRUTH[n])
+                                                           for k, n in enumerate(est.names)}
+                row["one-step covariance"] = est.diagnostics.get("covariance", {}).get("kind", "gauss-newton")
             if method == "two-step-tf":
                 row["chi2"] = est.diagnostics.get("second_step_test")
+            elif method == "two-step-zp":
+                row["chi2 zp"] = est.diagnostics.get("second_step_test")
         rows.append(row)
-        one, two = row["one-step"]["c22"], row["two-step-tf"]["c22"]
-        print(f"seed {seed}: c22 one-step {100 * one[0]:+.3f} % (std {100 * one[1]:.3f} %)  two-step "
-              f"{100 * two[0]:+.3f} % (std {100 * two[1]:.3f} %)", flush=True)
-        write_results("coverage_two_step_error_scale", rows)
+        c22 = "  ".join(f"{m} {100 * row[m]['c22'][0]:+.3f} % (std {100 * row[m]['c22'][1]:.3f} %)" for m in methods)
+        print(f"seed {seed}: c22 {c22}", flush=True)
+        write_results(name, rows)
     return rows
 
 
@@ -365,6 +386,10 @@ def main() -> None:
     parser.add_argument("--short-level", type=int, metavar="RECORDS",
                         help="the input-correlation test's level on RECORDS 300-sample records fitted with the right "
                              "hold (writes coverage_short_level.json)")
+    parser.add_argument("--error-scale", metavar="SIMULATOR",
+                        help="one-step's error and standard error per seed on F1, 1 %% records of SIMULATOR (lsim, "
+                             "daq, daq-delay; --oversample, --seeds; writes "
+                             "coverage_onestep_error_scale_SIMULATOR[OVERSAMPLE].json)")
     parser.add_argument("--oversample", type=int, default=16,
                         help="oversampling of the DAQ simulators (default 16; 64 for claims at 1 %% noise)")
     args = parser.parse_args()
@@ -376,19 +401,26 @@ def _main(args: argparse.Namespace) -> None:
     if args.false_alarm:
         write_results("coverage_direct_false_alarm", run_false_alarm(args.false_alarm))
         return
+    if args.error_scale:
+        over = args.oversample if args.error_scale != "lsim" else OVERSAMPLE
+        tag = args.error_scale + (str(over) if args.error_scale != "lsim" else "")
+        run_error_scale(range(args.seeds or 10), over, args.error_scale, ("one-step",),
+                        f"coverage_onestep_error_scale_{tag.replace('-', '_')}")
+        return
     if args.short_level:
         write_results("coverage_short_level", run_short_level(args.short_level))
         return
     two_step = os.environ.get("CAPPE_BENCH_TWO_STEP")
+    seeds = range(int(os.environ.get("CAPPE_BENCH_SEEDS", "10")))
     if two_step == "errors":
-        run_error_scale(range(10))
+        run_error_scale(seeds)
         return
     if two_step:  # CAPPE_BENCH_TWO_STEP_CASES=3,4,5: a part of the cases (indices), to run in parallel processes
         inputs, cases, name = ((2, TWO_STEP_BOTH_INPUTS, "coverage_two_step_f1f2") if two_step == "f1f2" else
                                (1, TWO_STEP_CASES, "coverage_two_step"))
         part = os.environ.get("CAPPE_BENCH_TWO_STEP_CASES")
         picked = [int(i) for i in part.split(",")] if part else range(len(cases))
-        run_two_step(range(10), inputs=inputs, cases=tuple(cases[i] for i in picked),
+        run_two_step(seeds, inputs=inputs, cases=tuple(cases[i] for i in picked),
                      out=name + (f"_part{picked[0]}" if part else ""))
         return
     if any(v is not None for v in (args.methods, args.simulators, args.noises, args.inputs, args.seeds)):
