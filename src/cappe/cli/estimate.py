@@ -259,8 +259,9 @@ def _text(result: Any, method: str) -> str:
     if isinstance(sensitivity, dict) and sensitivity:
         from cappe.estimate._intersample import sensitivity_text
 
+        moves = sensitivity_text(sensitivity, ruled_out=diagnostics.get("intersample_ruled_out"))
         lines.append(f"were the inputs between samples not {diagnostics.get('intersample', '?')}, the estimate would "
-                     f"move (largest): {sensitivity_text(sensitivity)}")
+                     f"move (largest): {moves}")
     analysis = diagnostics.get("residual_analysis")
     if isinstance(analysis, dict) and "outputs" in analysis:
         white = analysis.get("white", {})

@@ -81,7 +81,7 @@ def intersample_sensitivity(
     std: Array,
     step: float = 1e-5,
     iterations: int = 3,
-) -> dict[str, dict[str, dict[str, float]]]:
+) -> tuple[dict[str, dict[str, dict[str, float]]], dict[str, Array]]:
     """The Gauss-Newton shift of an estimate fitted to the same data under another intersample behaviour.
 
     A few Gauss-Newton steps of the refit under the other behaviour from the estimate: its forced response
@@ -123,15 +123,18 @@ def intersample_sensitivity(
 
     Returns
     -------
-    dict
+    shifts : dict
         ``{behaviour: {parameter: {"shift": relative change, "shift_std": change / std}}}`` for every behaviour
         other than ``used``.
+    errors : dict of str to ndarray, shape (n_samples, n_out)
+        The output errors of each such refit (data minus model, the fit's output units), to test whether the data
+        rule that behaviour out.
     """
     nt = space.n
     values = space.from_internal(theta)
     at = respond(theta, tuple(INTERSAMPLE))
     if used not in at:
-        return {}
+        return {}, {}
 
     def slopes(point: Array, hold: str) -> Array:
         """d y_hold / dtheta at point (central differences), noise-weighted, time-major rows."""
@@ -146,6 +149,7 @@ def intersample_sensitivity(
     fitted = slopes(theta, used)
     prior = regular - jac.T @ jac
     out: dict[str, dict[str, dict[str, float]]] = {}
+    refit_errors: dict[str, Array] = {}
     for hold in (h for h in at if h != used):
         delta = np.zeros(jac.shape[1])  # the parameters' and the nuisance parameters' change
         for _ in range(iterations):
@@ -159,14 +163,17 @@ def intersample_sensitivity(
             j_other[:, :nt] += slopes(theta + delta[:nt], hold) - fitted
             # the estimate's own gradient (zero at its optimum) is left out
             gradient = j_other.T @ errors - jac.T @ residual - prior @ delta
-            delta = delta + np.linalg.solve(prior + j_other.T @ j_other, gradient)
+            change = np.linalg.solve(prior + j_other.T @ j_other, gradient)
+            delta = delta + change
+            # the output errors at the refit, to first order from the last evaluation
+            refit_errors[hold] = (errors - j_other @ change).reshape(-1, sigma.size) * sigma[None, :]
         moved = space.from_internal(theta + delta[:nt]) - values
         with np.errstate(invalid="ignore", divide="ignore"):
             rel = np.where(values != 0, moved / np.abs(values), np.nan)
             in_std = np.where(np.isfinite(std) & (std > 0), moved / std, np.nan)
         out[hold] = {n: {"shift": float(r), "shift_std": float(z)}
                      for n, r, z in zip(space.names, rel, in_std, strict=True)}
-    return out
+    return out, refit_errors
 
 
 def _largest(shifts: Mapping[str, Mapping[str, float]], count: int) -> list[tuple[str, float, float]]:
@@ -174,7 +181,10 @@ def _largest(shifts: Mapping[str, Mapping[str, float]], count: int) -> list[tupl
     return sorted(rows, key=lambda r: -abs(r[2]) if np.isfinite(r[2]) else -abs(r[1]) * 1e-9)[:count]
 
 
-def sensitivity_text(sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]], count: int = 3) -> str:
+def sensitivity_text(
+    sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]], count: int = 3,
+    ruled_out: Mapping[str, bool] | None = None,
+) -> str:
     """One line naming the largest shifts per behaviour.
 
     Parameters
@@ -183,6 +193,8 @@ def sensitivity_text(sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]
         :func:`intersample_sensitivity`'s result.
     count : int
         Parameters named per behaviour.
+    ruled_out : mapping of str to bool, optional
+        Per behaviour, whether the residual tests reject its refit (said after its shifts).
 
     Returns
     -------
@@ -193,12 +205,14 @@ def sensitivity_text(sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]
     for hold, shifts in sensitivity.items():
         named = ", ".join(f"{n} {100 * r:+.3g} %" + (f" ({z:+.2g} std)" if np.isfinite(z) else "")
                           for n, r, z in _largest(shifts, count))
-        parts.append(f"{hold}: {named}")
+        said = " (its refit fails the residual tests)" if ruled_out and ruled_out.get(hold, False) else ""
+        parts.append(f"{hold}: {named}{said}")
     return "; ".join(parts)
 
 
 def sensitivity_warning(
-    sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]], rejected: bool
+    sensitivity: Mapping[str, Mapping[str, Mapping[str, float]]], rejected: bool,
+    ruled_out: Mapping[str, bool] | None = None,
 ) -> tuple[str | None, list[str]]:
     """The warning where a parameter would move by more than :data:`DEPENDS_LEVEL` standard errors, and which.
 
@@ -208,6 +222,9 @@ def sensitivity_warning(
         :func:`intersample_sensitivity`'s result.
     rejected : bool
         Whether the residual tests reject the fit (then the data speak against the assumed behaviour).
+    ruled_out : mapping of str to bool, optional
+        Per behaviour, whether the residual tests reject its refit (the data then tell it apart from the assumed
+        one, and it is not warned of).
 
     Returns
     -------
@@ -219,6 +236,8 @@ def sensitivity_warning(
     dependent: list[str] = []
     clauses = []
     for hold, shifts in sensitivity.items():
+        if ruled_out and ruled_out.get(hold, False):
+            continue
         moved = [(n, r, z) for n, r, z in _largest(shifts, len(shifts)) if np.isfinite(z) and abs(z) > DEPENDS_LEVEL]
         if not moved:
             continue
@@ -229,8 +248,9 @@ def sensitivity_warning(
         clauses.append(f"were they {_WERE.get(hold, hold)}, {named}{more}")
     if not clauses:
         return None, []
-    verdict = ("the residual tests reject the assumed behaviour: fit with one-step --intersample bl or state the "
-               "right --intersample" if rejected else
-               "the data do not tell the behaviours apart: state --intersample, or fit with one-step --intersample bl")
+    verdict = ("the residual tests reject the assumed behaviour and not this one: state the right --intersample, "
+               "or fit with one-step --intersample bl" if rejected else
+               "the residual tests do not tell the behaviours apart: state --intersample as the inputs were "
+               "recorded, or fit with one-step --intersample bl")
     return ("the estimate depends on the inputs' intersample behaviour: " + "; ".join(clauses) + "; " + verdict,
             dependent)

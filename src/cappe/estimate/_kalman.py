@@ -968,20 +968,30 @@ def _with_intersample_sensitivity(
 
     The forced responses of the continuous model at theta (scaled units, as the output errors) to the recorded
     inputs under each behaviour, and the Gauss-Newton shift of the output-error estimate their differences cause.
-    Where a parameter would move by more than a standard error, a warning says so and
+    Each refit's output errors get the residual tests: a behaviour they reject is one the data rule out
+    (``diagnostics["intersample_ruled_out"]``). Where a parameter would move by more than a standard error under a
+    behaviour the data do not rule out, a warning says so and
     ``diagnostics["intersample_dependent"]`` names it. The fit stays a success where its tests pass: the estimate
     and its interval are right under the stated behaviour, which the data cannot refute; the warning says that the
     answer is conditional on it.
     """
+    from cappe.identify._residual_analysis import residual_analysis
+
     def respond(at: Array, holds: Sequence[str]) -> dict[str, Array]:
         a, b, c, d = aug.continuous(at[None, :])
         return forced_responses(a[0], b[0], c[0], d[0], record.w / aug.w_scale, record.dt, holds)
 
-    sensitivity = intersample_sensitivity(respond, aug.intersample, jac, residual, regular, r_std, theta,
-                                          aug.space, estimate.std)
+    sensitivity, refit_errors = intersample_sensitivity(respond, aug.intersample, jac, residual, regular, r_std,
+                                                        theta, aug.space, estimate.std)
+    # the residual tests of each refit: a behaviour whose refit fails them is one the data rule out
+    ruled_out = {hold: not residual_analysis(residuals=[errors], inputs=[record.w], output_names=record.outputs,
+                                             input_names=record.inputs).passed
+                 for hold, errors in refit_errors.items()}
     diagnostics = dict(estimate.diagnostics)
     diagnostics["intersample_sensitivity"] = sensitivity
-    line, dependent = sensitivity_warning(sensitivity, rejected=diagnostics.get("fit_test") == "failed")
+    diagnostics["intersample_ruled_out"] = ruled_out
+    line, dependent = sensitivity_warning(sensitivity, rejected=diagnostics.get("fit_test") == "failed",
+                                          ruled_out=ruled_out)
     diagnostics["intersample_dependent"] = dependent
     message = estimate.message
     if line is not None:
