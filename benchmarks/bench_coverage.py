@@ -339,7 +339,7 @@ def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, .
         for kind in kinds:
             for noise in noises:
                 for inputs in excitations:
-                    covered = pairs = successes = warned = 0
+                    covered = pairs = successes = warned = depends = silent = 0
                     worst = 0.0
                     t0, c0 = time.perf_counter(), time.process_time()
                     for seed in seeds:
@@ -358,14 +358,22 @@ def run(methods: tuple[str, ...], kinds: tuple[str, ...], noises: tuple[float, .
                         successes += bool(est.success)
                         # a fit with a WARNING line in its text (a failed residual test is one, and not a success)
                         warned += bool(est.diagnostics.get("warnings"))
+                        # the estimate depends on the inputs' intersample behaviour by more than 1 std (EKF, UKF)
+                        told = any("intersample behaviour" in w for w in est.diagnostics.get("warnings", []))
+                        depends += told
+                        # a fit that misses the truth, passes its residual test and says nothing of the hold
+                        missed = any(not lo <= TRUTH[n] <= hi for n, (lo, hi) in zip(est.names, est.ci95, strict=True))
+                        silent += missed and est.diagnostics.get("fit_test") == "passed" and not told
                     row = {"method": method, "simulator": kind, "oversample": over, "noise": noise, "inputs": inputs,
                            "seeds": len(seeds), "coverage": covered / pairs, "worst_relative_error": worst,
-                           "successes": successes, "warned": warned, "seconds": time.perf_counter() - t0,
+                           "successes": successes, "warned": warned, "intersample_warned": depends,
+                           "silent_misses": silent, "seconds": time.perf_counter() - t0,
                            "cpu_seconds": time.process_time() - c0}
                     rows.append(row)
                     print(f"{method:>12s} {kind:>9s} {100 * noise:3.0f} % F1{'+F2' if inputs == 2 else '   '} "
                           f"coverage {100 * row['coverage']:5.1f} %  worst {100 * worst:6.2f} %  "
                           f"success {successes}/{len(seeds)}  warned {warned}/{len(seeds)}  "
+                          f"intersample {depends}/{len(seeds)}  silent misses {silent}  "
                           f"{row['cpu_seconds']:6.1f} s CPU", flush=True)
                     if out is not None:
                         write_results(out, rows)

@@ -246,6 +246,8 @@ def _text(result: Any, method: str) -> str:
         interval = interval_text(lo, hi, v)
         practical = diagnostics.get("practically_non_identifiable", {})
         flag = "yes" if result.identifiable[k] else f"NO ({practical[name]})" if name in practical else "NO"
+        if flag == "yes" and name in diagnostics.get("intersample_dependent", []):
+            flag = "depends on intersample"
         lines.append(f"  {name:>10s}  {v:13.6g}  {rel}     {interval:>24s}   {flag}")
     if result.combinations:
         lines.append("undetermined combinations (relative changes): " + "; ".join(result.combinations))
@@ -253,6 +255,13 @@ def _text(result: Any, method: str) -> str:
     if isinstance(weakest, dict):
         lines.append(f"practically non-identifiable: the data determine the unknowns except along "
                      f"{weakest['combination']} (relative changes, std {100 * weakest['relative_std']:.3g} %)")
+    sensitivity = diagnostics.get("intersample_sensitivity")
+    if isinstance(sensitivity, dict) and sensitivity:
+        from cappe.estimate._intersample import sensitivity_text
+
+        moves = sensitivity_text(sensitivity, ruled_out=diagnostics.get("intersample_ruled_out"))
+        lines.append(f"were the inputs between samples not {diagnostics.get('intersample', '?')}, the estimate would "
+                     f"move (largest): {moves}")
     analysis = diagnostics.get("residual_analysis")
     if isinstance(analysis, dict) and "outputs" in analysis:
         white = analysis.get("white", {})

@@ -89,6 +89,7 @@ from scipy import stats
 
 from cappe._rng import RandomLike
 from cappe.estimate._base import Estimator, with_residual_tests
+from cappe.estimate._intersample import forced_responses, intersample_sensitivity, sensitivity_warning
 from cappe.estimate._one_step import _select as _select_channels
 from cappe.estimate._result import ParameterEstimate
 from cappe.estimate._space import ParameterSpace
@@ -687,7 +688,7 @@ class _KalmanEstimator(Estimator):
         analysis = tested.diagnostics.get("residual_analysis", {})
         coloured = "white" in analysis and not all(analysis["white"].values())
         if not (self.covariance == "sandwich" or (self.covariance == "auto" and coloured)):
-            return tested
+            return _with_intersample_sensitivity(tested, aug, record, theta, jac, residual, regular, r_std)
         # the Newey-West sandwich around the regularized output-error information (its bread)
         lag = newey_west_bandwidth([n_samples], analysis)
         bread = np.linalg.inv(regular)
@@ -698,8 +699,9 @@ class _KalmanEstimator(Estimator):
         diagnostics = dict(estimate.diagnostics)
         diagnostics["covariance"] = {"kind": "sandwich (Newey-West)", "lags": lag,
                                      "gauss_newton_std": dict(zip(space.names, tested.std.tolist(), strict=True))}
-        return with_residual_tests(replace(estimate, diagnostics=diagnostics), [output_errors], [record.w],
-                                   record.outputs, record.inputs)
+        tested = with_residual_tests(replace(estimate, diagnostics=diagnostics), [output_errors], [record.w],
+                                     record.outputs, record.inputs)
+        return _with_intersample_sensitivity(tested, aug, record, theta, jac, residual, regular, r_std)
 
     def _passes(self, constant: bool) -> int:
         """The most filter passes: ``passes``, or where it is None (the UKF's default) :data:`_REFINED_PASSES` when
@@ -956,6 +958,47 @@ class _KalmanEstimator(Estimator):
         cost = float(np.sum(last.nis)) if finite else float("nan")
         return ParameterEstimate(self.method, space.names, values, std, ci95, corr, identifiable, combos, cost,
                                  bool(success), message, diagnostics)
+
+
+def _with_intersample_sensitivity(
+    estimate: ParameterEstimate, aug: _Augmented, record: _Record, theta: Array, jac: Array, residual: Array,
+    regular: Array, r_std: Array,
+) -> ParameterEstimate:
+    """The estimate with its intersample sensitivity (:mod:`cappe.estimate._intersample`) in the diagnostics.
+
+    The forced responses of the continuous model at theta (scaled units, as the output errors) to the recorded
+    inputs under each behaviour, and the Gauss-Newton shift of the output-error estimate their differences cause.
+    Each refit's output errors get the residual tests: a behaviour they reject is one the data rule out
+    (``diagnostics["intersample_ruled_out"]``). Where a parameter would move by more than a standard error under a
+    behaviour the data do not rule out, a warning says so and
+    ``diagnostics["intersample_dependent"]`` names it. The fit stays a success where its tests pass: the estimate
+    and its interval are right under the stated behaviour, which the data cannot refute; the warning says that the
+    answer is conditional on it.
+    """
+    from cappe.identify._residual_analysis import residual_analysis
+
+    def respond(at: Array, holds: Sequence[str]) -> dict[str, Array]:
+        a, b, c, d = aug.continuous(at[None, :])
+        return forced_responses(a[0], b[0], c[0], d[0], record.w / aug.w_scale, record.dt, holds)
+
+    sensitivity, refit_errors = intersample_sensitivity(respond, aug.intersample, jac, residual, regular, r_std,
+                                                        theta, aug.space, estimate.std)
+    # the residual tests of each refit: a behaviour whose refit fails them is one the data rule out
+    ruled_out = {hold: not residual_analysis(residuals=[errors], inputs=[record.w], output_names=record.outputs,
+                                             input_names=record.inputs).passed
+                 for hold, errors in refit_errors.items()}
+    diagnostics = dict(estimate.diagnostics)
+    diagnostics["intersample_sensitivity"] = sensitivity
+    diagnostics["intersample_ruled_out"] = ruled_out
+    line, dependent = sensitivity_warning(sensitivity, rejected=diagnostics.get("fit_test") == "failed",
+                                          ruled_out=ruled_out)
+    diagnostics["intersample_dependent"] = dependent
+    message = estimate.message
+    if line is not None:
+        diagnostics["warnings"] = [*diagnostics.get("warnings", []), line]
+        message += (f"; {dependent} depend on the assumed intersample behaviour ({aug.intersample}) by more than "
+                    f"a standard error")
+    return replace(estimate, message=message, diagnostics=diagnostics)
 
 
 def _initial_state(aug: _Augmented, theta: Array, w: Array, y: Array, r_std: Array) -> tuple[Array, Array]:
