@@ -488,7 +488,7 @@ CASES = [
       for option, extra in (("--method", ["--method", "two-step-tf"]), ("--truth", ["--truth", "{w}/rig_truth.json"]),
                             ("--unknowns", ["--unknowns", "k11,k12"]), ("--noise", ["--noise", "0.05"]),
                             ("--seeds", ["--seeds", "2"]), ("--start", ["--start", "{w}/rig_start.json"]),
-                            ("--setting", ["--setting", "instruments=model"]), ("--fs", ["--fs", "800"]),
+                            ("--setting", ["--setting", "instruments=none"]), ("--fs", ["--fs", "800"]),
                             ("--duration", ["--duration", "2"]))],
     # -- identify (the small slide model, tiny samples) ------------------------------------------------------------
     *[_case("identify", option, ["identify", str(SLIDE), "--reference", "{w}/slide_ref.json", "--n-gsa", "8",
