@@ -451,15 +451,14 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
         s, x, k = lam_r[moving], x_all[:, moving], moving.size
         # dX x per parameter for every moving mode, from the model's sparse patterns: (n_p, n, k) each
         products = model.matrix_derivative_products(full, position, x, parameters=list(names))
-        ss = s[:, None, None]
-
-        def per_mode(a: Array) -> Array:  # (n_p, n, k) -> (k, n_p, n)
-            return np.asarray(a).transpose(2, 0, 1)
-
+        # dQ x = s^2 dM x + s dD x + dK x + i dH x per parameter and mode, (n_p, n, k), summed in place
+        dq = products["M"] * (s * s)
+        dq += (products["C"] + products["G"]) * s
+        dq += products["K"]
+        dq += 1j * products["H"]
         # -dQ x, laid out (k, n_p, n + 1): rhs[j].T is mode j's (n + 1, n_p) right-hand side in Fortran order
         rhs = np.zeros((k, n_p, n + 1), dtype=complex)
-        rhs[:, :, :n] = -(ss * ss * per_mode(products["M"]) + ss * per_mode(products["C"] + products["G"])
-                          + per_mode(products["K"]) + 1j * per_mode(products["H"]))
+        np.negative(dq.transpose(2, 0, 1), out=rhs[:, :, :n])
         # the bordered matrices, transposed (C order): [[Q(s), Q'(s) x], [x^H scaled, 0]]^T per mode
         flat_t = np.stack([mass.T, visc.T, stiff.T]).astype(complex).reshape(3, n * n)  # Q(s)^T = (s^2, s, 1) @ flat_t
         border_t = np.zeros((k, n + 1, n + 1), dtype=complex)
@@ -489,7 +488,9 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
         along = -(np.einsum("jn,jpn->jp", gauge, dx) + ds * np.einsum("jn,nj->j", left_mass, x)[:, None])
         dx += along[:, :, None] * x.T[:, None, :]
         d_poles[:, moving] = ds.T
-        d_shapes[:, :, moving] = (dx @ sensors.T).transpose(1, 2, 0)
+        # the sensor rows are sparse (a few DOFs each): one sparse product for every mode and parameter
+        at_sensors = sps.csr_array(sensors) @ dx.reshape(k * n_p, n).T  # (n_s, k n_p)
+        d_shapes[:, :, moving] = at_sensors.reshape(-1, k, n_p).transpose(2, 0, 1)
     return ExactModeDerivatives(
         poles=lam_r,
         shapes=sensors @ x_all,
