@@ -139,7 +139,6 @@ def derivatives(
         raise ModelError(msg)
     sel = [model.parameter_names.index(name) for name in names]
     mats = model.matrices(p, position, names=("M", "K", "C", "G", "H"))
-    dmats = model.matrix_derivatives(p, position, names=("M", "K", "C", "H"), parameters=names)
     n = model.n_dof
     # only the undamped eigen-solution (with its PSD checks) is needed: no inputs or outputs
     system = MechanicalSystem(M=mats["M"], C=mats["C"], K=mats["K"], G=mats["G"], H=mats["H"],
@@ -181,8 +180,15 @@ def derivatives(
     # identification project (dK - lam dM) phi_r at once instead; either order is exact, each keeps the rounding
     # its seeded results were made with (one projection here changes them in the 14th digit, at no measurable
     # gain in speed: 8 ms per call on the machine tool either way).
-    dk = phi.T @ (dmats["K"] @ phi[:, index])
-    dm = phi.T @ (dmats["M"] @ phi[:, index])
+    # the derivative matrices times the differentiated modes from the model's sparse patterns (no dense (n_p, n, n)
+    # stacks: on the three-axis machine's stiffness refinement they were a quarter of each call), (n_p, n, m) each
+    phi_r = phi[:, index]
+    if index.size and names:
+        dx_phi = model.matrix_derivative_products(p, position, phi_r, ("M", "K", "C", "H"), parameters=names)
+    else:
+        dx_phi = {name: np.zeros((len(names), n, index.size)) for name in ("M", "K", "C", "H")}
+    dk = phi.T @ dx_phi["K"]
+    dm = phi.T @ dx_phi["M"]
     coupling = dk - lam_r[None, None, :] * dm
     # the modes are the rows of the kernel's batch
     d_lam_t, coef = mode_derivative_terms(np.broadcast_to(lam, (index.size, n)), index,
@@ -193,11 +199,10 @@ def derivatives(
     rigid = omega == 0
     safe = np.where(rigid, 1.0, omega)
     d_omega = np.where(rigid, 0.0, d_lam / (2 * safe))
-    phi_r = phi[:, index]
     c_r = np.einsum("ir,ir->r", phi_r, mats["C"] @ phi_r)  # (one BLAS product: a three-operand einsum loops)
     h_r = np.einsum("ir,ir->r", phi_r, mats["H"] @ phi_r)
-    dc = np.einsum("ir,pir->pr", phi_r, dmats["C"] @ phi_r) + 2 * np.einsum("jr,pjr->pr", mats["C"].T @ phi_r, d_phi)
-    dh = np.einsum("ir,pir->pr", phi_r, dmats["H"] @ phi_r) + 2 * np.einsum("jr,pjr->pr", mats["H"].T @ phi_r, d_phi)
+    dc = np.einsum("ir,pir->pr", phi_r, dx_phi["C"]) + 2 * np.einsum("jr,pjr->pr", mats["C"].T @ phi_r, d_phi)
+    dh = np.einsum("ir,pir->pr", phi_r, dx_phi["H"]) + 2 * np.einsum("jr,pjr->pr", mats["H"].T @ phi_r, d_phi)
     zeta = np.where(rigid, 0.0, c_r / (2 * safe) + h_r / (2 * safe**2))
     d_zeta = dc / (2 * safe) - c_r * d_omega / (2 * safe**2) + dh / (2 * safe**2) - h_r * d_omega / safe**3
     d_zeta = np.where(rigid, 0.0, d_zeta)
