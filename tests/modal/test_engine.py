@@ -562,6 +562,24 @@ def test_quadratic_modes_iterate_side_by_side_each_at_its_own_pace(slide, steps,
     np.testing.assert_allclose(batch.poles, default.poles, rtol=1e-12)  # both converged to round-off
 
 
+@pytest.mark.parametrize("n", [1, 7, 162])
+def test_the_inverse_iteration_one_column_solve_equals_scipy_lu_solve(n):
+    # issue 24 (speed): the inverse-iteration steps solve one column with getrf's factors by two BLAS trsv (no getrs
+    # set-up); against scipy's lu_solve of the same factors and numpy's solve, on complex matrices that pivot
+    from cappe.modal._engine import _lu_solve, _row_order
+
+    rng = np.random.default_rng(n)
+    a = rng.standard_normal((n, n)) + 1j * rng.standard_normal((n, n))
+    b = rng.standard_normal(n) + 1j * rng.standard_normal(n)
+    lu, piv, info = scipy.linalg.lapack.zgetrf(a)
+    assert info == 0
+    assert n == 1 or np.any(piv != np.arange(n))  # rows interchanged: the order is exercised
+    x = _lu_solve(lu, _row_order(piv), b.copy())
+    # both run the same forward and back substitutions: equal to a few ulps of the solution (trsm vs trsv order)
+    np.testing.assert_allclose(x, scipy.linalg.lu_solve((lu, piv), b), rtol=0, atol=1e-13 * np.abs(x).max())
+    np.testing.assert_allclose(a @ x, b, rtol=0, atol=1e-12 * n * np.abs(a).max() * np.abs(x).max())
+
+
 @pytest.mark.parametrize("split", [0.0, 1e-7, 1e-3])
 def test_quadratic_exact_modes_of_repeated_and_close_frequencies(split, monkeypatch):
     # issue 24: a mass on springs of (nearly) equal x and y stiffness, a damper at 30 degrees coupling x and y: the

@@ -285,9 +285,10 @@ class ExactModalProblem:
             total = np.sum(a * a, axis=0)
             turn = np.exp(-0.5j * np.angle(total))[None, :]
             d_theta = (np.sum(a[None] * da, axis=1) / total).imag  # (n_unknowns, m)
-            da = ((da - 1j * d_theta[:, None, :] * a[None]) * turn[None]).real.astype(complex)
-            a = (a * turn).real.astype(complex)
-        x = self.targets[k]
+            # real from here on, as the realized reference shapes are: the products below in real arithmetic
+            da = ((da - 1j * d_theta[:, None, :] * a[None]) * turn[None]).real
+            a = (a * turn).real
+        x = self.targets[k].real if self.shapes == "real" else self.targets[k]
         c = np.sum(a.conj() * x, axis=0)  # a^H x per mode
         aa = np.sum(np.abs(a) ** 2, axis=0)
         w_abs = np.abs(lam_r)

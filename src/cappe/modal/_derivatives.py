@@ -139,7 +139,6 @@ def derivatives(
         raise ModelError(msg)
     sel = [model.parameter_names.index(name) for name in names]
     mats = model.matrices(p, position, names=("M", "K", "C", "G", "H"))
-    dmats = model.matrix_derivatives(p, position, names=("M", "K", "C", "H"), parameters=names)
     n = model.n_dof
     # only the undamped eigen-solution (with its PSD checks) is needed: no inputs or outputs
     system = MechanicalSystem(M=mats["M"], C=mats["C"], K=mats["K"], G=mats["G"], H=mats["H"],
@@ -181,8 +180,15 @@ def derivatives(
     # identification project (dK - lam dM) phi_r at once instead; either order is exact, each keeps the rounding
     # its seeded results were made with (one projection here changes them in the 14th digit, at no measurable
     # gain in speed: 8 ms per call on the machine tool either way).
-    dk = phi.T @ (dmats["K"] @ phi[:, index])
-    dm = phi.T @ (dmats["M"] @ phi[:, index])
+    # the derivative matrices times the differentiated modes from the model's sparse patterns (no dense (n_p, n, n)
+    # stacks: on the three-axis machine's stiffness refinement they were a quarter of each call), (n_p, n, m) each
+    phi_r = phi[:, index]
+    if index.size and names:
+        dx_phi = model.matrix_derivative_products(p, position, phi_r, ("M", "K", "C", "H"), parameters=names)
+    else:
+        dx_phi = {name: np.zeros((len(names), n, index.size)) for name in ("M", "K", "C", "H")}
+    dk = phi.T @ dx_phi["K"]
+    dm = phi.T @ dx_phi["M"]
     coupling = dk - lam_r[None, None, :] * dm
     # the modes are the rows of the kernel's batch
     d_lam_t, coef = mode_derivative_terms(np.broadcast_to(lam, (index.size, n)), index,
@@ -193,11 +199,10 @@ def derivatives(
     rigid = omega == 0
     safe = np.where(rigid, 1.0, omega)
     d_omega = np.where(rigid, 0.0, d_lam / (2 * safe))
-    phi_r = phi[:, index]
     c_r = np.einsum("ir,ir->r", phi_r, mats["C"] @ phi_r)  # (one BLAS product: a three-operand einsum loops)
     h_r = np.einsum("ir,ir->r", phi_r, mats["H"] @ phi_r)
-    dc = np.einsum("ir,pir->pr", phi_r, dmats["C"] @ phi_r) + 2 * np.einsum("jr,pjr->pr", mats["C"].T @ phi_r, d_phi)
-    dh = np.einsum("ir,pir->pr", phi_r, dmats["H"] @ phi_r) + 2 * np.einsum("jr,pjr->pr", mats["H"].T @ phi_r, d_phi)
+    dc = np.einsum("ir,pir->pr", phi_r, dx_phi["C"]) + 2 * np.einsum("jr,pjr->pr", mats["C"].T @ phi_r, d_phi)
+    dh = np.einsum("ir,pir->pr", phi_r, dx_phi["H"]) + 2 * np.einsum("jr,pjr->pr", mats["H"].T @ phi_r, d_phi)
     zeta = np.where(rigid, 0.0, c_r / (2 * safe) + h_r / (2 * safe**2))
     d_zeta = dc / (2 * safe) - c_r * d_omega / (2 * safe**2) + dh / (2 * safe**2) - h_r * d_omega / safe**3
     d_zeta = np.where(rigid, 0.0, d_zeta)
@@ -451,15 +456,14 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
         s, x, k = lam_r[moving], x_all[:, moving], moving.size
         # dX x per parameter for every moving mode, from the model's sparse patterns: (n_p, n, k) each
         products = model.matrix_derivative_products(full, position, x, parameters=list(names))
-        ss = s[:, None, None]
-
-        def per_mode(a: Array) -> Array:  # (n_p, n, k) -> (k, n_p, n)
-            return np.asarray(a).transpose(2, 0, 1)
-
+        # dQ x = s^2 dM x + s dD x + dK x + i dH x per parameter and mode, (n_p, n, k), summed in place
+        dq = products["M"] * (s * s)
+        dq += (products["C"] + products["G"]) * s
+        dq += products["K"]
+        dq += 1j * products["H"]
         # -dQ x, laid out (k, n_p, n + 1): rhs[j].T is mode j's (n + 1, n_p) right-hand side in Fortran order
         rhs = np.zeros((k, n_p, n + 1), dtype=complex)
-        rhs[:, :, :n] = -(ss * ss * per_mode(products["M"]) + ss * per_mode(products["C"] + products["G"])
-                          + per_mode(products["K"]) + 1j * per_mode(products["H"]))
+        np.negative(dq.transpose(2, 0, 1), out=rhs[:, :, :n])
         # the bordered matrices, transposed (C order): [[Q(s), Q'(s) x], [x^H scaled, 0]]^T per mode
         flat_t = np.stack([mass.T, visc.T, stiff.T]).astype(complex).reshape(3, n * n)  # Q(s)^T = (s^2, s, 1) @ flat_t
         border_t = np.zeros((k, n + 1, n + 1), dtype=complex)
@@ -489,7 +493,9 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
         along = -(np.einsum("jn,jpn->jp", gauge, dx) + ds * np.einsum("jn,nj->j", left_mass, x)[:, None])
         dx += along[:, :, None] * x.T[:, None, :]
         d_poles[:, moving] = ds.T
-        d_shapes[:, :, moving] = (dx @ sensors.T).transpose(1, 2, 0)
+        # the sensor rows are sparse (a few DOFs each): one sparse product for every mode and parameter
+        at_sensors = sps.csr_array(sensors) @ dx.reshape(k * n_p, n).T  # (n_s, k n_p)
+        d_shapes[:, :, moving] = at_sensors.reshape(-1, k, n_p).transpose(2, 0, 1)
     return ExactModeDerivatives(
         poles=lam_r,
         shapes=sensors @ x_all,

@@ -1188,10 +1188,10 @@ class NumericModel:
         out: dict[str, NDArray[Any]] = {}
         for name in names:
             part = jac[self._slices[name]]
-            terms = np.flatnonzero(np.any(part != 0, axis=1))
             products = np.asarray(self._term_operators(pos)[name] @ cols).reshape(-1, n * m)  # (n_terms, n m)
-            # each term moves with one or two parameters: the weighting is a sparse product too
-            result = np.asarray(sps.csr_array(part[terms].T) @ products[terms]).reshape(sel.size, n, m)
+            # each term moves with one or two parameters: the weighting is a sparse product too (its zero entries,
+            # the terms that do not move, are dropped by the sparse matrix: no copy of the products they select)
+            result = np.asarray(sps.csr_array(part.T) @ products).reshape(sel.size, n, m)
             extra = self._residual_derivatives(name, p, pos, sel)
             out[name] = result if extra is None else result + extra @ cols
         return out
