@@ -615,6 +615,23 @@ def test_two_step_with_two_forces_shares_the_poles_across_the_inputs(two_mass):
             assert worst < 0.01, (seed, method, est.parameters)
 
 
+@pytest.mark.slow  # two two-step fits of 6000 samples: ~6 s
+def test_two_step_with_one_force_fits_step_1_by_the_continuous_model(two_mass):
+    """lsim records, F1 only, 5 % noise, ``foh``. Step 1 was the discrete OE model per output, whose search stopped
+    in local minima on d1 (its lightly damped 99.5 Hz mode misplaced, a cost 1.2-1.5 x the continuous model's from
+    the same poles): the second step FAILED its chi-square test on 4-5 of 10 bench records with errors up to 150 and
+    300 % (here, seeds 101 and 103: not a success, chi2 248 on 11 dof for 103). Step 1 is now the continuous model
+    for one input too: every fit passes, and every interval covers."""
+    for seed in (101, 103):
+        rng = np.random.default_rng(seed)
+        f = _force(N, FS, 700.0, rng)
+        data = _record(f, _lsim(TRUTH, f), 0.05, rng)
+        est = _fit(two_mass, "two-step-tf", data, intersample="foh")
+        assert est.success, (seed, est.message)
+        assert est.diagnostics["second_step_test"]["passed"]
+        assert all(lo <= TRUTH[n] <= hi for n, (lo, hi) in zip(est.names, est.ci95, strict=True)), (seed, est.ci95)
+
+
 def test_two_step_arx_route_refuses_a_non_held_input(two_mass):
     data = TimeData.from_rate(FS, {"F1": np.sin(np.arange(800.0)), "d1": np.cos(np.arange(800.0))})
     with pytest.raises(DataError, match="identification 'arx'.*assumes a held input; got intersample 'foh'"):

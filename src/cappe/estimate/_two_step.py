@@ -34,10 +34,13 @@ and its output errors go to the same residual tests as the OE route. A delay bet
 modelled (estimated per output it trades with the numerators' high coefficients): the residual tests and the
 chi-square test below have to catch it.
 
-**Step 1 for several inputs** (``zoh`` or ``foh``). The OE model has one denominator per input, the physics one for
-all: where an input excites a mode weakly, its path may place that mode elsewhere (on ``lsim`` records with F1 + F2
-and 5 % noise, d2's F2 path lost the rig's 181 Hz mode, and the second step FAILED its chi-square test on 8 of 10
-records). Step 1 then fits the same continuous model with shared poles, simulated with the held or linear input
+**Step 1 for held or linear inputs** (``zoh`` or ``foh``). The OE model has one denominator per input, the physics
+one for all: where an input excites a mode weakly, its path may place that mode elsewhere (on ``lsim`` records with
+F1 + F2 and 5 % noise, d2's F2 path lost the rig's 181 Hz mode, and the second step FAILED its chi-square test on 8
+of 10 records); and with one input its search stops in local minima (F1 only, 5 % noise: d1's lightly damped 99.5 Hz
+mode misplaced, a loss 1.2-1.5 x the continuous model's from the same poles, the chi-square test FAILED on 4-5 of 10
+records). Step 1 then fits the same continuous model with shared poles (its residues solved at every pole
+vector), simulated with the held or linear input
 (the exact step of each mode, :func:`cappe.systems.statespace.hold_weights`; no feed-through where a held input
 reaches a displacement or velocity one sample late), from each input's OE poles, the lowest cost kept. Natural
 frequencies are bounded by the Nyquist frequency (above it a mode is an alias of one below at the samples).
@@ -526,32 +529,34 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
             y = data.channel(output)
             hold = "zoh" if est.intersample == "zoh" else "foh"
             names = [p.input for p in pairs if p.output == output]
-            if est.intersample == "bl" or len(inputs) > 1:
-                # a band-limited input has no finite-order discrete equivalent, and the OE model's denominators of
-                # several inputs are not shared: the continuous model with the physical poles shared by the inputs,
-                # simulated as the input behaves between the samples, from each input's OE poles (the lowest cost;
-                # band-limited: from the first input's, as measured in the README's tables)
-                bl: _BandLimitedOE | str = "no start"
-                for name in inputs if est.intersample != "bl" else inputs[:1]:
-                    with warnings.catch_warnings():
-                        warnings.simplefilter("ignore", IllConditionedWarning)
-                        start = oe.continuous_poles(name)
-                    trial = _fit_band_limited(data, inputs, output, start, est.intersample, feedthrough=nk == 0)
-                    if isinstance(bl, str) or (not isinstance(trial, str) and trial.errors @ trial.errors
-                                               < bl.errors @ bl.errors):
-                        bl = trial
-                if not isinstance(bl, str):
-                    errors[output] = bl.errors
-                    coef = bl.coefficients(bl.parameters_, names)
-                    for k, name in enumerate(names):
-                        block = coef[k * (2 * n + 1): (k + 1) * (2 * n + 1)]
-                        tfs[f"{name}->{output}"] = TransferFunctionModel(
-                            tuple(float(c) for c in block[: n + 1][::-1]),
-                            (1.0, *(float(c) for c in block[n + 1:][::-1])), name, output)
-                    propagated[output] = (bl.no_covariance if bl.covariance_ is None else _linearized(
-                        partial(bl.coefficients, inputs=names), bl.parameters_, bl.covariance_))
-                    continue
-                fallback.append(f"{output}: {bl}")
+            # a band-limited input has no finite-order discrete equivalent, the OE model's denominators of
+            # several inputs are not shared, and the discrete OE search itself stops in local minima (one input,
+            # 5 % noise: d1's lightly damped 99.5 Hz mode misplaced on 4 of 10 lsim records, a cost 1.2-1.5 x
+            # the continuous model's from the same poles): the continuous model with the physical poles shared
+            # by the inputs, its residues solved at every pole vector, simulated as the input behaves between the
+            # samples, from each input's OE poles (the lowest cost; band-limited: from the first input's, as
+            # measured in the README's tables)
+            bl: _BandLimitedOE | str = "no start"
+            for name in inputs if est.intersample != "bl" else inputs[:1]:
+                with warnings.catch_warnings():
+                    warnings.simplefilter("ignore", IllConditionedWarning)
+                    start = oe.continuous_poles(name)
+                trial = _fit_band_limited(data, inputs, output, start, est.intersample, feedthrough=nk == 0)
+                if isinstance(bl, str) or (not isinstance(trial, str) and trial.errors @ trial.errors
+                                           < bl.errors @ bl.errors):
+                    bl = trial
+            if not isinstance(bl, str):
+                errors[output] = bl.errors
+                coef = bl.coefficients(bl.parameters_, names)
+                for k, name in enumerate(names):
+                    block = coef[k * (2 * n + 1): (k + 1) * (2 * n + 1)]
+                    tfs[f"{name}->{output}"] = TransferFunctionModel(
+                        tuple(float(c) for c in block[: n + 1][::-1]),
+                        (1.0, *(float(c) for c in block[n + 1:][::-1])), name, output)
+                propagated[output] = (bl.no_covariance if bl.covariance_ is None else _linearized(
+                    partial(bl.coefficients, inputs=names), bl.parameters_, bl.covariance_))
+                continue
+            fallback.append(f"{output}: {bl}")
             errors[output] = oe.residuals(data) / max(float(np.sqrt(np.mean((y - y.mean()) ** 2))), 1e-300)
             for p in pairs:
                 if p.output == output:
@@ -571,17 +576,21 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
     if est.intersample == "bl" and est.identification == "oe":
         source = ("continuous output-error model simulated with a band-limited input (time data)" if not fallback else
                   f"oe (time data), the first-order hold standing in for a band-limited input ({'; '.join(fallback)})")
-    elif len(inputs) > 1 and est.identification == "oe":
-        source = (f"continuous output-error model with poles shared by the inputs, simulated with a "
+    elif est.identification == "oe":
+        shared = " with poles shared by the inputs" if len(inputs) > 1 else ""
+        source = (f"continuous output-error model{shared}, simulated with a "
                   f"{'held' if est.intersample == 'zoh' else 'linear'} input (time data)" if not fallback else
-                  f"oe (time data), one denominator per input ({'; '.join(fallback)})")
+                  f"oe (time data){', one denominator per input' if len(inputs) > 1 else ''} ({'; '.join(fallback)})")
     tf_list = [tfs[p.label] for p in pairs]
     warning = ""
     if fallback and est.intersample == "bl":
         warning = (f"step 1 fell back to the first-order hold's inverse for a band-limited input, which is biased "
                    f"(gain error ~(omega dt)^2 / 12): {'; '.join(fallback)}")
-    elif fallback:
+    elif fallback and len(inputs) > 1:
         warning = (f"step 1 fell back to one output-error denominator per input, which need not share the poles: "
+                   f"{'; '.join(fallback)}")
+    elif fallback:
+        warning = (f"step 1 fell back to the discrete output-error model, whose search may stop in a local minimum: "
                    f"{'; '.join(fallback)}")
     if est.identification != "oe":
         return _Step1(pairs, tf_list, source, tested,
