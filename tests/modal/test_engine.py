@@ -622,3 +622,78 @@ def test_a_quadratic_mode_that_misses_falls_back_to_the_state_eig_and_is_counted
     assert engine._quadratic_modes(p, {"z": 0.1}) is None
     assert engine._state_eigensystem(p, {"z": 0.1}) is not None
     np.testing.assert_array_equal(batch.poles, full.poles)
+
+
+def _counted_steps(monkeypatch) -> list[int]:
+    """Count the inverse-iteration steps (one-column LU solves) of the quadratic exact modes."""
+    import cappe.modal._engine as engine_module
+
+    steps = [0]
+    solve = engine_module._lu_solve
+
+    def counted(*args):
+        steps[0] += 1
+        return solve(*args)
+
+    monkeypatch.setattr(engine_module, "_lu_solve", counted)
+    return steps
+
+
+def test_warm_started_exact_modes_take_fewer_steps_and_equal_the_state_matrix(slide, monkeypatch):
+    # issue 24 (speed): with warm_start, the exact modes of a search's next vector start from the previous vector's
+    # poles and shapes at that position, not from the undamped modes: fewer inverse-iteration steps (the error
+    # shrinks by |s - sigma| / |s' - sigma| per step, and the previous pole is the nearer shift), the same modes:
+    # against scipy's eig of the state matrix and the cold engine
+    import cappe.modal._engine as engine_module
+
+    model = NumericModel(slide)
+    p = random_params(model, 1, 11)[0]
+    q = p * np.exp(1e-4 * np.random.default_rng(3).standard_normal(p.size))  # a trust-region step away
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)  # 6 of 12 modes
+    steps = _counted_steps(monkeypatch)
+    cold = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1)
+    cold.evaluate(p, {"z": 0.1}, exact=True)
+    steps[0] = 0
+    cold_batch = cold.evaluate(q, {"z": 0.1}, exact=True)
+    cold_steps = steps[0]
+    warm = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1, warm_start=True)
+    warm.evaluate(p, {"z": 0.1}, exact=True)
+    steps[0] = 0
+    warm_batch = warm.evaluate(q, {"z": 0.1}, exact=True)
+    assert warm.exact_solves == {"quadratic": 2, "fallback": 0}
+    assert steps[0] < 0.75 * cold_steps, (steps[0], cold_steps)
+    _assert_equal_to_the_state_matrix(model, q, {"z": 0.1}, warm_batch)
+    np.testing.assert_allclose(warm_batch.poles, cold_batch.poles, rtol=1e-12)
+    np.testing.assert_allclose(warm_batch.complex_shapes, cold_batch.complex_shapes, rtol=0,
+                               atol=1e-9 * np.abs(cold_batch.complex_shapes).max())
+    assert warm._quadratic_modes(q, {"z": 0.1}) is not None  # kept for the derivatives at the same vector
+
+
+def test_a_warm_start_that_converges_to_other_modes_is_checked_and_goes_cold(slide, monkeypatch):
+    # issue 24: previous modes in another order (two modes swapped, as when their frequencies cross between two
+    # vectors of a search) converge to modes that are not the undamped modes' partners: the checks reject them and
+    # every mode is solved cold, giving the cold solve's modes bit for bit. The default engine does not warm-start:
+    # the same vector gives the same bits whatever came before
+    import cappe.modal._engine as engine_module
+
+    model = NumericModel(slide)
+    far, p = random_params(model, 2, 4)
+    monkeypatch.setattr(engine_module, "QUADRATIC_FRACTION", 0.5)
+    engine = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1)
+    first = engine.evaluate(p, {"z": 0.1}, full_shapes=True)
+    mats = {k: v[0] for k, v in model.matrices(p[None, :], {"z": 0.1}).items()}
+    phi, omega, zeta = first.full_shapes[0], 2 * np.pi * first.frequency[0], first.damping[0]
+    steps = _counted_steps(monkeypatch)
+    cold = engine_module.QuadraticModes.solve(mats, phi, omega, zeta)
+    assert cold is not None
+    cold_steps, steps[0] = steps[0], 0
+    order = np.array([1, 0, 2, 3, 4, 5])
+    swapped = engine_module.QuadraticModes(mats, cold.poles[order], cold.shapes[:, order])
+    checked = engine_module.QuadraticModes.solve(mats, phi, omega, zeta, previous=swapped)
+    assert checked is not None
+    assert steps[0] > cold_steps  # the warm attempt ran, and was rejected
+    np.testing.assert_array_equal(checked.poles, cold.poles)
+    np.testing.assert_array_equal(checked.shapes, cold.shapes)
+    reference = ModalEngine(model, n_modes=6, sensors="dofs", n_workers=1).evaluate(p, {"z": 0.1}, exact=True)
+    engine.evaluate(far, {"z": 0.1}, exact=True)
+    np.testing.assert_array_equal(engine.evaluate(p, {"z": 0.1}, exact=True).poles, reference.poles)

@@ -130,7 +130,7 @@ class ExactModalProblem:
         self.shapes = shapes
         self.sqrt_w = np.sqrt(np.asarray(weights, dtype=float))
         self.pairing = pairing
-        self.engine = ModalEngine(model, sensors=list(reference.sensors), n_modes=n_modes)
+        self.engine = ModalEngine(model, sensors=list(reference.sensors), n_modes=n_modes, warm_start=True)
         self.positions = [model.structure.resolve_position(s.position) for s in reference.sets]
         raw = [s.shapes if shapes == "complex" else realized(s.shapes).astype(complex) for s in reference.sets]
         norms = [np.linalg.norm(x, axis=0) for x in raw]
