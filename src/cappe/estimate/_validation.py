@@ -307,14 +307,14 @@ def _receptance_lines(model: NumericModel, params: Array, position: Mapping[str,
     mats = model.matrices(params, position)
     omega = 2 * np.pi * np.asarray(freq, dtype=float)
     # Exact modal synthesis over all 2n state-space modes replaces a direct solve per line where it agrees with it:
-    # on the three-axis machine (162 DOF, 600 lines, 117 x 117 channels, one BLAS thread) one call took 1.2-1.25
-    # CPU s by direct solves and 0.81-0.83 s by the synthesis (the state matrix's eig, V^-1 B, the sum over modes
-    # and the check), some 21 calls per `cappe identify`. The synthesis is not exact where the state matrix is
-    # defective or its eigenvectors nearly so (rigid-body modes: a double zero pole; near-repeated defective
-    # poles), nor on a pole; and its error is absolute, some 1e-11 of a line's largest |H|, where the direct solve
-    # keeps every entry to ~1e-13 of itself: far above the highest pole, where cross FRFs fall 1e-13 below the
-    # line's largest, it is noise, and the line's CSF with it. Its own checks (_state_synthesis) and the direct
-    # solve at a few lines (_synthesis_agrees) decide; any doubt takes the direct solve at every line.
+    # on the three-axis machine (162 DOF, 600 lines, 117 x 117 channels, one BLAS thread, interleaved) one call
+    # took 1.19-1.40 CPU s by direct solves and 0.81-0.88 s by the synthesis (the state matrix's eig, V^-1 B, the
+    # sum over modes and the check), some 21 calls per `cappe identify`. The synthesis is not exact where the state
+    # matrix is defective or its eigenvectors nearly so (rigid-body modes: a double zero pole; near-repeated
+    # defective poles), nor on a pole; and its error is absolute, some 1e-11 of a line's largest |H|, where the
+    # direct solve keeps every entry to ~1e-13 of itself: far above the highest pole, where cross FRFs fall 1e-13
+    # below the line's largest, it is noise, and the line's CSF with it. Its own checks (_state_synthesis) and the
+    # direct solve at a few lines (_synthesis_agrees) decide; any doubt takes the direct solve at every line.
     out = _state_synthesis(mats, omega, s_in_t, s_out)
     if out is not None and (omega.size == 0 or _synthesis_agrees(out, mats, omega, s_in_t, s_out)):
         return out
