@@ -383,6 +383,137 @@ def test_receptance_matches_the_mechanical_system_frf(bench):
     assert np.allclose(h[0, 0], frf.H[0, 0], rtol=1e-10, atol=0)
 
 
+#: A two-mass rig on no ground: free-free, a rigid-body mode (a double zero pole of the state matrix).
+FREE_TWO_MASS = """format: cappe.model/1
+name: free-two-mass
+parameters:
+  - {name: m1, value: 1.39, unit: kg, kind: mass}
+  - {name: m2, value: 1.09, unit: kg, kind: mass}
+  - {name: k12, value: 0.12e6, unit: N/m, kind: stiffness}
+  - {name: c12, value: 3.0, unit: N s/m, kind: damping}
+bodies:
+  - {name: mass1, mass: m1, dofs: [x]}
+  - {name: mass2, mass: m2, dofs: [x]}
+elements:
+  - {name: spring12, bodies: [mass1, mass2], stiffness: {x: k12}, damping: {x: c12}}
+sensors:
+  - {name: n1, body: mass1}
+  - {name: n2, body: mass2}
+"""
+
+
+def _dense_receptance(model, params, position, freq):
+    """Independent reference: ``H = S (K + iH + i omega (C + G) - omega^2 M)^-1 S^T`` over every sensor channel,
+    one dense solve per line (line-major)."""
+    mats = model.matrices(params, position)
+    labels, s = model.sensor_matrix(params, position)
+    out = []
+    for w in 2 * np.pi * np.asarray(freq):
+        z = mats["K"] + 1j * mats["H"] + 1j * w * (mats["C"] + mats["G"]) - w**2 * mats["M"]
+        out.append(s @ np.linalg.solve(z, s.T))
+    return list(labels), np.array(out)
+
+
+def _direct_lines(monkeypatch):
+    """Count the lines the validation solves directly (``frf_lines``) and the state eigen-solves (``eig``)."""
+    import cappe.estimate._validation as validation
+
+    counts = {"lines": 0, "eig": []}
+    direct, eig = validation.frf_lines, np.linalg.eig
+
+    def counted_lines(mats, omega, *args, **kwargs):
+        counts["lines"] += np.size(omega)
+        return direct(mats, omega, *args, **kwargs)
+
+    def counted_eig(a):
+        counts["eig"].append(np.shape(a))
+        return eig(a)
+
+    monkeypatch.setattr(validation, "frf_lines", counted_lines)
+    monkeypatch.setattr(np.linalg, "eig", counted_eig)
+    return counts
+
+
+def _assert_receptance_close(got, want, line_rtol, entry_rtol):
+    """``got`` (out, in, freq) against the line-major ``want``: within ``line_rtol`` of each line's largest
+    ``|H|``, and within ``entry_rtol`` of each entry of the FRFs the validation keeps (its negligible power)."""
+    from cappe.estimate._validation import NEGLIGIBLE_POWER
+
+    err = np.abs(np.moveaxis(got, -1, 0) - want)
+    assert np.all(err.max(axis=(1, 2)) <= line_rtol * np.abs(want).max(axis=(1, 2)))
+    power = np.square(np.abs(want)).sum(axis=0)
+    kept = power > NEGLIGIBLE_POWER * power.max()
+    assert np.all(err[:, kept] <= entry_rtol * np.abs(want[:, kept]))
+
+
+@pytest.mark.parametrize(("name", "params", "position", "f_max"), [
+    ("spindle-bearing", {"Omega": 200.0, "chx": 2500.0}, None, 2000.0),  # gyroscopic G, non-proportional viscous C
+    ("uniaxial-machine-tool", {}, {"z": 0.3}, 500.0),  # hysteretic H and viscous C, 45 DOF, its modes to 500 Hz
+])
+def test_receptance_by_modal_synthesis_equals_the_dense_solve(monkeypatch, name, params, position, f_max):
+    model = NumericModel(load_model(f"builtin:{name}"))
+    p = model.vector(params)
+    assert np.any(model.matrices(p, position)["G" if "Omega" in params else "H"])  # the term under test is there
+    freq = np.linspace(0.0, f_max, 201)[1:]
+    labels, want = _dense_receptance(model, p, position, freq)
+    counts = _direct_lines(monkeypatch)
+    got = model_receptance(model, p, position, freq, labels, labels)
+    assert counts["lines"] <= 4  # the synthesis gave these FRFs, not the direct solve it is checked against
+    # 1e-9 of each line's largest |H| and 1e-4 of each kept entry (the validation's check): the synthesis differs
+    # from the direct solve by 1e-12-2e-10 and 1e-6 on the 162-DOF three-axis machine (cond V 1.9e6), by 2e-13 and
+    # 5e-5 on the spindle; a wrong pole, mode or scale shows at 1e-3 or more
+    _assert_receptance_close(got, want, 1e-9, 1e-4)
+
+
+def test_receptance_far_above_the_poles_falls_back_to_the_direct_solve(monkeypatch):
+    # to 3 times the highest natural frequency (3.1 kHz) cross FRFs fall to 1e-13 of the line's largest |H|, below
+    # the synthesis's absolute error: 9e3 of themselves
+    model = NumericModel(load_model("builtin:uniaxial-machine-tool"))
+    freq = np.linspace(0.0, 9400.0, 101)[1:]
+    labels, want = _dense_receptance(model, model.nominal, None, freq)
+    counts = _direct_lines(monkeypatch)
+    got = model_receptance(model, model.nominal, None, freq, labels, labels)
+    assert counts["lines"] > freq.size  # the check lines, then every line
+    _assert_receptance_close(got, want, 1e-12, 1e-9)  # direct solves of the same matrices: rounding
+
+
+def test_receptance_of_a_free_free_model_falls_back_to_the_direct_solve(monkeypatch, tmp_path):
+    (tmp_path / "free.yaml").write_text(FREE_TWO_MASS)
+    model = NumericModel(load_model(tmp_path / "free.yaml"))
+    freq = np.linspace(0.0, 150.0, 51)[1:]  # 0 Hz is a pole of the rigid-body mode
+    labels, want = _dense_receptance(model, model.nominal, None, freq)
+    counts = _direct_lines(monkeypatch)
+    got = model_receptance(model, model.nominal, None, freq, labels, labels)
+    assert counts["lines"] == freq.size  # the rigid-body (zero) pole sends every line to the direct solve
+    # both are direct solves of the same matrices: rounding only (1e-13 of the line's largest |H|)
+    err = np.abs(np.moveaxis(got, -1, 0) - want).max(axis=(1, 2))
+    assert np.all(err <= 1e-12 * np.abs(want).max(axis=(1, 2)))
+
+
+def test_receptance_falls_back_where_the_check_lines_disagree(monkeypatch, bench):
+    import cappe.estimate._validation as validation
+
+    freq = np.linspace(0.0, 900.0, 31)[1:]
+    labels = ["tool:x", "bed1:y"]
+    every, want = _dense_receptance(bench, bench.nominal, {"z": 0.15}, freq)
+    picked = [every.index(c) for c in labels]
+    want = want[:, picked][:, :, picked]
+    monkeypatch.setattr(validation, "_SYNTHESIS_RTOL", 0.0)  # no synthesis agrees with the direct solve exactly
+    counts = _direct_lines(monkeypatch)
+    got = validation._receptance_lines(bench, bench.nominal, {"z": 0.15}, freq, labels, labels)
+    assert counts["lines"] == freq.size + 4  # 4 check lines (first, middle, last, largest |H|), then every line
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=0)  # direct solves of the same matrices: rounding
+
+
+def test_receptance_makes_one_state_eig_and_no_solve_per_line(monkeypatch):
+    # issue 24: one direct solve per line cost 2.27 CPU s per call on the three-axis machine (600 lines, 117 x 117
+    # channels), about 21 calls per identification, none of it an eigen-solve of the bound
+    model = NumericModel(load_model("builtin:uniaxial-machine-tool"))
+    labels = list(model.sensor_matrix(model.nominal, None)[0])
+    counts = _direct_lines(monkeypatch)
+    model_receptance(model, model.nominal, None, np.linspace(0.0, 600.0, 301)[1:], labels, labels)
+    assert counts["eig"] == [(1, 2 * model.n_dof, 2 * model.n_dof)]
+    assert counts["lines"] <= 4
 def test_summarize_tails():
     values = np.linspace(0.0, 1.0, 101)
     good = summarize(values, larger_is_better=True)
