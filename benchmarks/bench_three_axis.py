@@ -13,7 +13,8 @@ lowest oscillatory poles, the shapes at the model's sensor channels (no cappe mo
 Every eigen-solve the run makes is counted as in :mod:`benchmarks.bench_pipeline` (numpy's ``eigh`` and ``eig``,
 scipy's generalized ``eigh`` of the modal derivatives, and the complex LU factorizations with which the exact modes
 are solved and differentiated on the quadratic eigenproblem) and the same number of solves of the same sizes is
-timed bare on one thread: ``bound_s``, the least time the same algorithm could take on one core. Reported per
+timed bare on one thread: ``bound_s``, the time the same solves take bare on one core (the median of
+:data:`BOUND_TIMINGS` timings, each the best of five batches per solve kind; every timing is kept). Reported per
 truth: wall and CPU seconds, time per stage, peak memory, ``wall / bound`` and ``cpu / bound``, the load average
 before and after, and the worst stiffness and damping errors.
 
@@ -141,11 +142,12 @@ def main(seeds: list[int]) -> None:
             continue
         row = json.loads(stdout.strip().splitlines()[-1])
         row["load_before"], row["load_after"] = load_before, os.getloadavg()
-        bound = sum(_bare_seconds(e["kind"], e["n"], e["dtype"], e["count"]) for e in row["eigen_solves"])
+        bound, attempts = _bound(row["eigen_solves"])
         damping = _damping_names()
         stiff_err = [abs(v) for k, v in row["errors"].items() if k not in damping]
         damp_err = [abs(v) for k, v in row["errors"].items() if k in damping]
-        row.update({"bound_s": bound, "ratio_to_bound": row["wall_s"] / bound,
+        row.update({"bound_s": bound, "bound_attempts_s": attempts, "ratio_to_bound": row["wall_s"] / bound,
+                    "cpu_ratio_to_bound_range": [row["cpu_s"] / max(attempts), row["cpu_s"] / min(attempts)],
                     "cpu_ratio_to_bound": row["cpu_s"] / bound, "fit_cpu_ratio_to_bound": row["fit_cpu_s"] / bound,
                     "stiffness_worst": max(stiff_err), "damping_worst": max(damp_err), "settings": SETTINGS})
         stages = ", ".join(f"{k} {v:.1f}" for k, v in row["stages_s"].items())
@@ -155,10 +157,29 @@ def main(seeds: list[int]) -> None:
               f"s; wall {stages} s; CPU {cpu_stages} s), load {row['load_before'][0]:.1f} -> "
               f"{row['load_after'][0]:.1f}, peak memory {row['peak_memory_mib']:.0f} MiB; stiffness worst "
               f"{100 * row['stiffness_worst']:.2g} %, damping worst {100 * row['damping_worst']:.2g} %", flush=True)
-        print(f"  eigen-solves: {solves}; bound {bound:.1f} s on one core -> wall / bound "
-              f"{row['ratio_to_bound']:.2f}, CPU / bound {row['cpu_ratio_to_bound']:.2f}", flush=True)
+        low, high = row["cpu_ratio_to_bound_range"]
+        print(f"  eigen-solves: {solves}; bound {bound:.1f} s on one core (median of {len(attempts)} timings, "
+              f"{min(attempts):.1f}-{max(attempts):.1f} s) -> wall / bound {row['ratio_to_bound']:.2f}, CPU / bound "
+              f"{row['cpu_ratio_to_bound']:.2f} ({low:.2f}-{high:.2f} over the timings)", flush=True)
         rows.append(row)
         write_results("three_axis", rows)
+
+
+#: Timings of the bound after each run, a few seconds apart; the bound is their median. One timing (the best of five
+#: batches of each solve kind) varied by 10-35 % from one to the next on this quiet host (eigh of order 162: 2.1-2.9
+#: ms per matrix; truth 3's bound 113-149 s in five timings), more than the margin the ratio is judged by.
+BOUND_TIMINGS = 5
+
+
+def _bound(solves: list[dict[str, Any]]) -> tuple[float, list[float]]:
+    """The eigen-solve bound of a run's ``solves`` on one core (median of :data:`BOUND_TIMINGS` timings, seconds),
+    and every timing."""
+    attempts = []
+    for k in range(BOUND_TIMINGS):
+        if k:
+            time.sleep(2.0)
+        attempts.append(sum(_bare_seconds(e["kind"], e["n"], e["dtype"], e["count"]) for e in solves))
+    return float(np.median(attempts)), attempts
 
 
 def _damping_names() -> set[str]:
