@@ -541,7 +541,7 @@ def _from_time(est: _TwoStep, model: NumericModel, data: TimeData) -> _Step1:
                 with warnings.catch_warnings():
                     warnings.simplefilter("ignore", IllConditionedWarning)
                     start = oe.continuous_poles(name)
-                trial = _fit_band_limited(data, inputs, output, start, est.intersample, feedthrough=nk == 0)
+                trial = _fit_continuous_oe(data, inputs, output, start, est.intersample, feedthrough=nk == 0)
                 if isinstance(bl, str) or (not isinstance(trial, str) and trial.errors @ trial.errors
                                            < bl.errors @ bl.errors):
                     bl = trial
@@ -762,9 +762,10 @@ def _bl_basis(u_in: Array, u_nl: Array, dt: float, intersample: str = "bl") -> A
     return np.hstack([*per_input, np.ones((u_in.shape[0], 1)), free.real, free.imag])
 
 
-def _fit_band_limited(data: TimeData, inputs: Sequence[str], output: str, start: CArray,
-                      intersample: str = "bl", *, feedthrough: bool = True) -> _BandLimitedOE | str:
-    """Step 1 for a band-limited input: :class:`_BandLimitedOE` by separable least squares (the linear parameters
+def _fit_continuous_oe(data: TimeData, inputs: Sequence[str], output: str, start: CArray,
+                       intersample: str = "bl", *, feedthrough: bool = True) -> _BandLimitedOE | str:
+    """Step 1's continuous output-error model (every intersample behaviour; the name of :class:`_BandLimitedOE`
+    recalls the input it was first written for): fitted by separable least squares (the linear parameters
     solved at every poles-and-delay vector, which scipy's trust region searches from ``start``: the poles of the
     first-order-hold stand-in, ~1 % off), with its Gauss-Newton covariance ``s^2 (J^T J)^-1`` over every parameter
     (:func:`jacobian_uncertainty`; the Jacobian of the poles by central differences); no covariance, and why, where
