@@ -87,3 +87,31 @@ def test_grid_candidates_span_the_listed_range(capsys):
     doc = json.loads(out)
     assert [p["z"] for p in doc["candidates"]["positions"]] == pytest.approx([-0.294, 0.018, 0.33])
     assert doc["candidates"]["sensors"] == ["nut:x", "nut:y", "nut:z"]
+
+
+def test_the_rehearsal_commands_of_a_plan_off_the_grid_run_one_position_each(tmp_path, capsys):
+    # a new user on the three-axis machine (issue 24): the plan's four positions do not form a grid, and the printed
+    # command was one `cappe simulate --positions x=-0.6,y=0.8,z=0`, which simulate refuses ('y=0.8' is not a number)
+    # and which named only the first position. Now one simulate line per position, and the identify line reads them
+    from argparse import Namespace
+    from types import SimpleNamespace
+
+    from cappe.cli.plan_test import _commands
+
+    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
+    plan = SimpleNamespace(positions=positions, sensors=["head_rt:x", "spindle_nose:y"])
+    args = Namespace(model="builtin:three-axis-machine-tool", modes=3, noise_frequency=0.001, noise_damping=0.05,
+                     noise_shape=0.01)
+    commands = _commands(args, plan, ("x", "y", "z"))
+    lines = commands["simulate"].splitlines()
+    assert len(lines) == 2
+    assert "--reference ref1.json ref2.json " in commands["identify"]
+    argv = shlex.split(lines[1])[1:]
+    i = argv.index("--params")
+    del argv[i:i + 2]
+    argv[argv.index("-o") + 1] = str(tmp_path / "ref2.json")
+    code, _, err = run(capsys, *argv)
+    assert code == 0, err
+    ref = read_modal_data(tmp_path / "ref2.json")
+    assert [dict(s.position) for s in ref.sets] == [positions[1]]
+    assert list(ref.sensors) == plan.sensors

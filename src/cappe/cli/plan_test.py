@@ -137,16 +137,28 @@ def run(args: argparse.Namespace) -> int:
 
 
 def _commands(args: argparse.Namespace, plan: Any, axes: tuple[str, ...]) -> dict[str, str]:
+    """Command lines that rehearse the plan on simulated data: one cappe simulate where the plan's positions form a
+    grid (``--positions`` combines axes as a grid), else one per position (each axis at its value, ``ref1.json``,
+    ``ref2.json``, ...; one command per line), and the cappe identify that reads what they write."""
     noise = " ".join(f"--noise-{q} {getattr(args, f'noise_{q}'):g}" for q in NOISE_DEFAULTS)
     model = shlex.quote(args.model)
-    pos = " ".join(_positions_option(plan.positions, axes)) or "--positions " + ",".join(
-        f"{k}={v:g}" for k, v in plan.positions[0].items())
     sensors = ",".join(plan.sensors)
+    common = f"--sensors {sensors} --modes {args.modes} {noise}"
+    grid = _positions_option(plan.positions, axes)
+    if grid:
+        simulate = f"cappe simulate {model} --params truth.json {' '.join(grid)} {common} -o ref.json"
+        references = "ref.json"
+    else:
+        lines = []
+        for k, position in enumerate(plan.positions, start=1):
+            where = " ".join(f"--positions {a}={position[a]:g}" for a in axes)
+            lines.append(f"cappe simulate {model} --params truth.json {where} {common} --seed {k} -o ref{k}.json")
+        simulate = "\n".join(lines)
+        references = " ".join(f"ref{k}.json" for k in range(1, len(plan.positions) + 1))
     validation = "none" if len(plan.positions) < 2 else ",".join(f"{k}={v:g}" for k, v in plan.positions[0].items())
     return {
-        "simulate": f"cappe simulate {model} --params truth.json {pos} --sensors {sensors} --modes {args.modes} "
-                    f"{noise} -o ref.json",
-        "identify": f"cappe identify {model} --reference ref.json --validation none {noise} -o result.json",
+        "simulate": simulate,
+        "identify": f"cappe identify {model} --reference {references} --validation none {noise} -o result.json",
         "validation_note": f"the plan's positions are all identification positions (--validation none); hold out "
                            f"another position for validation (e.g. --validation {validation} takes one of them)",
     }
@@ -204,7 +216,7 @@ def _text(plan: Any, doc: dict[str, Any], args: argparse.Namespace) -> str:
             lines.append("(the median over all unknowns also counts those that even every candidate together leaves "
                          "undetermined; the D-criterion does not aim at it)")
     lines.append("rehearse it on simulated data:")
-    lines.append(f"  {doc['commands']['simulate']}")
+    lines.extend(f"  {line}" for line in doc["commands"]["simulate"].splitlines())
     lines.append(f"  {doc['commands']['identify']}")
     if args.out:
         lines.append(f"plan ({doc['format']}) written to {args.out}")
