@@ -138,3 +138,14 @@ def test_every_text_output_says_the_intervals_assume_the_known_parameters_exact(
     assert "assume 1 more known parameter exact that the model tags disturbable (mb)" in text
     assert "including 1 known parameter's uncertainty (relative std 5 %" in text
     assert partial.estimate.diagnostics["known_assumed_exact"] == ["mb"]
+
+
+def test_first_order_refinement_refuses_the_noise_options_in_the_command_line_terms(files, capsys):
+    # a new user (issue 24's trial on a fresh clone) got "noise weighting needs the exact-mode refinement (exact=True)"
+    # after the GSA had started: a Python argument they never gave. Now a usage error before any work, naming options
+    code = cli(["identify", str(files["tagged"]), "--reference", str(files["ref"]), *BASE, "--first-order",
+                "--noise-frequency", "0.005", "--noise-damping", "0.05", "--noise-shape", "0.02"])
+    assert code == EXIT_USAGE
+    err = capsys.readouterr().err
+    assert "--first-order" in err
+    assert "exact=True" not in err

@@ -289,6 +289,10 @@ def run(args: argparse.Namespace) -> int:
     if tolerance and args.first_order:
         msg = "--known-tolerance needs the exact-mode refinement (leave out --first-order)"
         raise UsageError(msg)
+    if args.first_order and _noise(args) is not None:
+        msg = ("--noise-frequency/--noise-damping/--noise-shape (or --noise) weight the exact-mode refinement: leave "
+               "out --first-order, or the noise options")
+        raise UsageError(msg)
     reference, notes = combined_reference(args.reference, args.sensor_map)
     measured, frf_notes = measured_frfs(args.frf, args.frf_position, reference, args.sensor_map)
     notes += frf_notes
