@@ -37,6 +37,8 @@ HUGE = "1" + "0" * 5000  # more digits than int(str) accepts (sys.get_int_max_st
     (b'{"k": 1.0, "k": 2.0}', r"parameter file .*p\.json gives the key 'k' twice in one object"),
     (b'{"k": 1', r"parameter file .*p\.json is not valid JSON: Expecting ',' delimiter at column 8$"),
     (b'{\n"k": 1\n"m": 2}', r"parameter file .*p\.json is not valid JSON: Expecting ',' delimiter at line 3, column 1$"),
+    # cut short after its first line (a new user's truncated file read "at column 1", the file's first character)
+    (b'{"k":\n', r"parameter file .*p\.json is not valid JSON: Expecting value at line 2, column 1$"),
 ])
 def test_bad_parameter_files_name_the_file_and_entry(tmp_path, content, pattern):
     path = tmp_path / "p.json"

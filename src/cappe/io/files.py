@@ -165,7 +165,10 @@ def parse_json(text: str, label: str) -> Any:
         return json.loads(text, parse_int=_parse_int, parse_float=_parse_float,
                           object_pairs_hook=lambda pairs: _unique_keys(pairs, label))
     except json.JSONDecodeError as exc:
-        where = f"line {exc.lineno}, column {exc.colno}" if "\n" in text.rstrip() else f"column {exc.colno}"
+        # a one-line text gives its column alone, unless the error sits past a trailing line break (a file cut
+        # short after its first line ends there: "column 1" alone pointed at the file's first character)
+        one_line = "\n" not in text.rstrip() and exc.lineno == 1
+        where = f"column {exc.colno}" if one_line else f"line {exc.lineno}, column {exc.colno}"
         msg = f"{label} is not valid JSON: {exc.msg} at {where}"
         raise DataError(msg) from exc
     except RecursionError as exc:  # the C parser counts nesting against the recursion limit and unwinds cleanly
