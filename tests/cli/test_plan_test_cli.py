@@ -18,6 +18,17 @@ def run(capsys, *argv):
     return code, out.out, out.err
 
 
+def _simulated(capsys, line, out):
+    """Run a printed cappe simulate line at the model's values (its --params file left out), writing ``out``."""
+    argv = shlex.split(line)[1:]
+    i = argv.index("--params")
+    del argv[i:i + 2]
+    argv[argv.index("-o") + 1] = str(out)
+    code, _, err = run(capsys, *argv)
+    assert code == 0, err
+    return read_modal_data(out)
+
+
 def test_plan_test_writes_a_plan_the_simulate_chain_takes(tmp_path, capsys):
     out = tmp_path / "plan.json"
     code, text, err = run(capsys, "plan-test", "builtin:uniaxial-machine-tool", "--n-positions", 2, "--n-sensors", 4,
@@ -43,13 +54,7 @@ def test_plan_test_writes_a_plan_the_simulate_chain_takes(tmp_path, capsys):
     assert len(doc["random_plans"]["median_relative_std_determinable"]) == 3
     assert f"median std over the {len(keep)} unknowns every candidate together determines" in text
     # the ready command line runs and gives modes at exactly the plan's positions and channels
-    argv = shlex.split(doc["commands"]["simulate"])[1:]
-    i = argv.index("--params")
-    del argv[i:i + 2]
-    argv[argv.index("-o") + 1] = str(tmp_path / "ref.json")
-    code, _, err = run(capsys, *argv)
-    assert code == 0, err
-    ref = read_modal_data(tmp_path / "ref.json")
+    ref = _simulated(capsys, doc["commands"]["simulate"], tmp_path / "ref.json")
     assert list(ref.sensors) == doc["sensors"]
     assert [dict(s.position) for s in ref.sets] == doc["positions"]
 
@@ -106,12 +111,6 @@ def test_the_rehearsal_commands_of_a_plan_off_the_grid_run_one_position_each(tmp
     lines = commands["simulate"].splitlines()
     assert len(lines) == 2
     assert "--reference ref1.json ref2.json " in commands["identify"]
-    argv = shlex.split(lines[1])[1:]
-    i = argv.index("--params")
-    del argv[i:i + 2]
-    argv[argv.index("-o") + 1] = str(tmp_path / "ref2.json")
-    code, _, err = run(capsys, *argv)
-    assert code == 0, err
-    ref = read_modal_data(tmp_path / "ref2.json")
+    ref = _simulated(capsys, lines[1], tmp_path / "ref2.json")
     assert [dict(s.position) for s in ref.sets] == [positions[1]]
     assert list(ref.sensors) == plan.sensors

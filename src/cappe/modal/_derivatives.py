@@ -182,16 +182,16 @@ def derivatives(
     # gain in speed: 8 ms per call on the machine tool either way).
     # the derivative matrices times the differentiated modes from the model's sparse patterns (no dense (n_p, n, n)
     # stacks: on the three-axis machine's stiffness refinement they were a quarter of each call), (n_p, n, m) each
+    # (only for the matrices the parameters move: the stiffness refinement's move no mass, and M's projection is
+    # as dear as K's)
     phi_r = phi[:, index]
-    if index.size and names:
-        dx_phi = model.matrix_derivative_products(p, position, phi_r, ("M", "K", "C", "H"), parameters=names)
-    else:
-        dx_phi = {name: np.zeros((len(names), n, index.size)) for name in ("M", "K", "C", "H")}
+    moved = _moved_matrices(model, names, ("M", "K", "C", "H")) if index.size else ()
+    dx_phi = model.matrix_derivative_products(p, position, phi_r, moved, parameters=names) if moved else {}
+    for name in ("M", "K", "C", "H"):
+        dx_phi.setdefault(name, np.zeros((len(names), n, index.size)))
     dk = phi.T @ dx_phi["K"]
-    # none of the parameters may move M (the stiffness refinement's): its projection, as dear as dK's, is zero
-    moves_mass = bool(set(names) & set(model.matrix_parameters("M")))
-    dm = phi.T @ dx_phi["M"] if moves_mass else np.zeros_like(dk)
-    coupling = dk - lam_r[None, None, :] * dm if moves_mass else dk
+    dm = phi.T @ dx_phi["M"] if "M" in moved else np.zeros_like(dk)
+    coupling = dk - lam_r[None, None, :] * dm if "M" in moved else dk
     # the modes are the rows of the kernel's batch
     d_lam_t, coef = mode_derivative_terms(np.broadcast_to(lam, (index.size, n)), index,
                                           coupling.transpose(2, 0, 1), dm[:, index, cols].T)
@@ -220,6 +220,12 @@ def derivatives(
         parameter_names=names,
         sensors=labels,
     )
+
+
+def _moved_matrices(model: NumericModel, names: Sequence[str], wanted: Sequence[str]) -> tuple[str, ...]:
+    """Those of the matrices ``wanted`` that some parameter of ``names`` moves (the others' derivatives are zero)."""
+    chosen = set(names)
+    return tuple(name for name in wanted if chosen & set(model.matrix_parameters(name)))
 
 
 def _stack_times(stack: Array, columns: NDArray[Any]) -> CArray:
@@ -459,9 +465,8 @@ def _quadratic_mode_derivatives(engine: ModalEngine, modes: QuadraticModes, pick
         # dX x per parameter for every moving mode, from the model's sparse patterns, for the matrices the parameters
         # move only (the joint refinement's stiffness and damping unknowns move no mass; 62 -> 55 ms per position of
         # the three-axis machine, best of four interleaved runs): (n_p, n, k) each
-        moved = tuple(name for name in ("M", "C", "G", "K", "H")
-                      if set(names) & set(model.matrix_parameters(name)))
-        products = model.matrix_derivative_products(full, position, x, moved, parameters=list(names))
+        moved = _moved_matrices(model, names, ("M", "C", "G", "K", "H"))
+        products = model.matrix_derivative_products(full, position, x, moved, parameters=list(names)) if moved else {}
         # -dQ x = -(s^2 dM x + s (dC + dG) x + dK x + i dH x) per parameter and mode, laid out (k, n_p, n + 1):
         # rhs[j].T is mode j's (n + 1, n_p) right-hand side in Fortran order
         rhs = np.zeros((k, n_p, n + 1), dtype=complex)
