@@ -103,7 +103,8 @@ def test_the_rehearsal_commands_of_a_plan_off_the_grid_run_one_position_each(tmp
 
     from cappe.cli.plan_test import _commands
 
-    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2, "z": 0.2}]
+    # the second position off the model's listed ones, with more digits than %g prints: simulated where planned
+    positions = [{"x": -0.6, "y": 0.4, "z": -0.2}, {"x": 0.6, "y": 1.2345678, "z": 0.2}]
     plan = SimpleNamespace(positions=positions, sensors=["head_rt:x", "spindle_nose:y"])
     args = Namespace(model="builtin:three-axis-machine-tool", modes=3, noise_frequency=0.001, noise_damping=0.05,
                      noise_shape=0.01)

@@ -99,7 +99,7 @@ def _positions_option(positions: list[dict[str, float]], axes: tuple[str, ...]) 
     values = {a: sorted({p[a] for p in positions}) for a in axes}
     if len(positions) != math.prod(len(v) for v in values.values()):
         return []
-    return [f"--positions {a}={','.join(f'{v:g}' for v in vals)}" for a, vals in values.items()]
+    return [f"--positions {a}={','.join(f'{v:.12g}' for v in vals)}" for a, vals in values.items()]
 
 
 def run(args: argparse.Namespace) -> int:
@@ -151,11 +151,11 @@ def _commands(args: argparse.Namespace, plan: Any, axes: tuple[str, ...]) -> dic
     else:
         lines = []
         for k, position in enumerate(plan.positions, start=1):
-            where = " ".join(f"--positions {a}={position[a]:g}" for a in axes)
+            where = " ".join(f"--positions {a}={position[a]:.12g}" for a in axes)
             lines.append(f"cappe simulate {model} --params truth.json {where} {common} --seed {k} -o ref{k}.json")
         simulate = "\n".join(lines)
         references = " ".join(f"ref{k}.json" for k in range(1, len(plan.positions) + 1))
-    validation = "none" if len(plan.positions) < 2 else ",".join(f"{k}={v:g}" for k, v in plan.positions[0].items())
+    validation = "none" if len(plan.positions) < 2 else ",".join(f"{k}={v:.12g}" for k, v in plan.positions[0].items())
     return {
         "simulate": simulate,
         "identify": f"cappe identify {model} --reference {references} --validation none {noise} -o result.json",
